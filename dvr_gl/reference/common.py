@@ -1,0 +1,89 @@
+"""NumPy twins of the shared GLSL in ``shaders/common``: ray-box entry and exit, volume
+sampling, opacity correction and compositing. Float64 unless told otherwise.
+
+Each function here has exactly one GLSL counterpart, named in its docstring; the shader
+unit tests compare the two over grids of inputs.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def ray_box(origins, dirs, lo, hi):
+    """Entry and exit distances of rays against the box [lo, hi] (GLSL ``intersectBox``).
+
+    Rays start at their origin: the entry is clamped to 0. A ray parallel to a pair of
+    faces is inside the slab iff its origin is (the 0 * inf case is resolved as such).
+    Returns (t_enter, t_exit); the ray misses where t_exit <= t_enter.
+    """
+    o = np.asarray(origins, np.float64)
+    d = np.asarray(dirs, np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = 1.0 / d
+        ta = (lo - o) * inv
+        tb = (hi - o) * inv
+    tmin = np.minimum(ta, tb)
+    tmax = np.maximum(ta, tb)
+    parallel = d == 0
+    inside = (o >= lo) & (o <= hi)
+    tmin = np.where(parallel, np.where(inside, -np.inf, np.inf), tmin)
+    tmax = np.where(parallel, np.where(inside, np.inf, -np.inf), tmax)
+    t0 = np.maximum(tmin.max(axis=-1), 0.0)
+    t1 = tmax.min(axis=-1)
+    return t0, t1
+
+
+def world_to_index(volume, points):
+    """World points (..., 3) to continuous sample indices (..., 3) in x, y, z order."""
+    return (np.asarray(points, np.float64) - volume.origin) / volume.spacing
+
+
+def trilinear(values, idx):
+    """Trilinear interpolation of ``values`` (nz, ny, nx) at continuous indices ``idx``
+    (..., 3) in x, y, z order, clamped to the domain (clamp-to-edge sampling)."""
+    nz, ny, nx = values.shape
+    upper = np.array([nx - 1, ny - 1, nz - 1], dtype=np.float64)
+    p = np.clip(idx, 0.0, upper)
+    i0 = np.minimum(np.floor(p).astype(np.int64), (upper - 1).astype(np.int64))
+    f = p - i0
+    x0, y0, z0 = i0[..., 0], i0[..., 1], i0[..., 2]
+    fx, fy, fz = f[..., 0], f[..., 1], f[..., 2]
+    v = values
+    c00 = v[z0, y0, x0] * (1 - fx) + v[z0, y0, x0 + 1] * fx
+    c10 = v[z0, y0 + 1, x0] * (1 - fx) + v[z0, y0 + 1, x0 + 1] * fx
+    c01 = v[z0 + 1, y0, x0] * (1 - fx) + v[z0 + 1, y0, x0 + 1] * fx
+    c11 = v[z0 + 1, y0 + 1, x0] * (1 - fx) + v[z0 + 1, y0 + 1, x0 + 1] * fx
+    return (c00 * (1 - fy) + c10 * fy) * (1 - fz) + (c01 * (1 - fy) + c11 * fy) * fz
+
+
+def cell_is_valid(volume, idx):
+    """True where the point (continuous indices) lies in a cell whose corners are all
+    finite; always True for volumes without masking."""
+    if volume.cell_valid is None:
+        return np.ones(np.shape(idx)[:-1], dtype=bool)
+    nz, ny, nx = volume.shape
+    upper = np.array([nx - 2, ny - 2, nz - 2])
+    c = np.clip(np.floor(idx).astype(np.int64), 0, upper)
+    return volume.cell_valid[c[..., 2], c[..., 1], c[..., 0]]
+
+
+def correct_opacity(alpha, length_over_unit):
+    """Opacity of a segment ``length_over_unit`` unit distances long whose unit-distance
+    opacity is ``alpha``: ``1 - (1 - alpha)^(L/u)``, computed as ``-expm1(L/u * log1p(-alpha))``
+    so that small opacities keep their relative precision (GLSL ``correctOpacity``).
+    alpha = 1 gives 1 for any positive length; a zero length gives 0."""
+    a = np.asarray(alpha, np.float64)
+    x = np.asarray(length_over_unit, np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        out = -np.expm1(x * np.log1p(-a))
+    out = np.where(x <= 0, 0.0, np.where(a >= 1, 1.0, out))
+    return out
+
+
+def composite_front_to_back(color_acc, transmittance, rgb, alpha):
+    """One over-operator step on associated colour (GLSL ``compositeFrontToBack``):
+    returns the new (colour, transmittance)."""
+    color_acc = color_acc + (transmittance * alpha)[..., None] * rgb
+    transmittance = transmittance * (1 - alpha)
+    return color_acc, transmittance

@@ -1,0 +1,385 @@
+"""The scene: plain, validated data that knows nothing of GL.
+
+Every class here checks its input once, at construction, and raises ``TypeError`` or
+``ValueError`` with a message naming the parameter and the offending value. Objects are
+immutable afterwards (arrays are stored read-only), so renderers may cache GPU resources
+by object identity.
+
+Conventions (see docs/conventions in the README): data is ``(nz, ny, nx)``, x fastest;
+spacing and origin are given in x, y, z order; sample ``data[k, j, i]`` sits at
+``origin + (i*sx, j*sy, k*sz)``; the field is the trilinear interpolant of the samples on
+the closed box from the first to the last sample.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+from numbers import Real
+
+import numpy as np
+
+SUPPORTED_DTYPES = (np.uint8, np.uint16, np.int16, np.float32, np.float64)
+MODES = ("composite", "mip", "minip", "average", "isosurface")
+MAX_IMAGE_SIDE = 16384
+
+
+def _vector3(name, value, *, positive=False):
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise TypeError(f"{name} must be three numbers, got {value!r}") from None
+    if arr.shape != (3,):
+        raise ValueError(f"{name} must have 3 components (x, y, z), got {value!r}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} must be finite, got {value!r}")
+    if positive and not np.all(arr > 0):
+        raise ValueError(f"{name} must be positive on every axis, got {value!r}")
+    arr.setflags(write=False)
+    return arr
+
+
+def _finite_number(name, value, *, positive=False):
+    if isinstance(value, bool) or not isinstance(value, Real):
+        raise TypeError(f"{name} must be a number, got {value!r}")
+    value = float(value)
+    if not math.isfinite(value):
+        raise ValueError(f"{name} must be finite, got {value!r}")
+    if positive and value <= 0:
+        raise ValueError(f"{name} must be positive, got {value!r}")
+    return value
+
+
+class Volume:
+    """A structured scalar volume.
+
+    Parameters
+    ----------
+    data : ndarray (nz, ny, nx) of uint8, uint16, int16, float32 or float64
+    spacing, origin : (x, y, z) world units
+    mask_nonfinite : if True, NaN/inf samples are allowed and every grid cell with a
+        non-finite corner is removed from the domain (no emission, no absorption);
+        otherwise non-finite samples are an error.
+    """
+
+    def __init__(self, data, spacing=(1.0, 1.0, 1.0), origin=(0.0, 0.0, 0.0), mask_nonfinite=False):
+        if not isinstance(data, np.ndarray):
+            raise TypeError(f"data must be a numpy array, got {type(data).__name__}")
+        if data.dtype.type not in SUPPORTED_DTYPES:
+            names = ", ".join(np.dtype(t).name for t in SUPPORTED_DTYPES)
+            raise TypeError(f"data dtype must be one of {names}, got {data.dtype}")
+        if data.ndim != 3:
+            raise ValueError(f"data must be 3-D (nz, ny, nx), got ndim={data.ndim} shape={data.shape}")
+        if min(data.shape) < 2:
+            raise ValueError(f"data needs at least 2 samples on every axis, got shape={data.shape}")
+        self.spacing = _vector3("spacing", spacing, positive=True)
+        self.origin = _vector3("origin", origin)
+        self.mask_nonfinite = bool(mask_nonfinite)
+
+        data = np.array(data, copy=True, order="C")
+        data.setflags(write=False)
+        self.data = data
+        finite = np.isfinite(data) if data.dtype.kind == "f" else None
+        if finite is not None and not finite.all():
+            if not self.mask_nonfinite:
+                bad = tuple(int(i) for i in np.argwhere(~finite)[0])
+                raise ValueError(
+                    f"data has non-finite values (first at index {bad}: {data[bad]!r}); "
+                    "pass mask_nonfinite=True to treat them as outside the domain")
+            if not finite.any():
+                raise ValueError("data has no finite value at all")
+            self.has_nonfinite = True
+        else:
+            self.has_nonfinite = False
+            finite = None
+        valid = data[finite] if finite is not None else data
+        self.data_range = (float(valid.min()), float(valid.max()))
+
+        if self.has_nonfinite:
+            # A cell (the cube between 8 neighbouring samples) is inside the domain only if
+            # all its corners are finite; the texture holds 0 where the data is not finite.
+            f = finite
+            c = (f[:-1, :-1, :-1] & f[:-1, :-1, 1:] & f[:-1, 1:, :-1] & f[:-1, 1:, 1:]
+                 & f[1:, :-1, :-1] & f[1:, :-1, 1:] & f[1:, 1:, :-1] & f[1:, 1:, 1:])
+            c.setflags(write=False)
+            self.cell_valid = c
+        else:
+            self.cell_valid = None
+        self._digest = None
+
+    # -- geometry ---------------------------------------------------------------
+    @property
+    def shape(self):
+        """(nz, ny, nx)"""
+        return self.data.shape
+
+    @property
+    def dims(self):
+        """Sample counts in x, y, z order."""
+        nz, ny, nx = self.data.shape
+        return np.array([nx, ny, nz])
+
+    @property
+    def extent(self):
+        """World size of the domain box, x, y, z."""
+        return (self.dims - 1) * self.spacing
+
+    @property
+    def bounds(self):
+        """(lower corner, upper corner) of the domain box in world units."""
+        return self.origin, self.origin + self.extent
+
+    @property
+    def min_spacing(self):
+        return float(self.spacing.min())
+
+    def values(self, dtype=np.float64):
+        """The samples as floats, non-finite ones replaced by 0 (they are masked)."""
+        v = self.data.astype(dtype)
+        if self.has_nonfinite:
+            v[~np.isfinite(v)] = 0
+        return v
+
+    def digest(self):
+        """A content hash (data, spacing, origin, masking) for caches on disk."""
+        if self._digest is None:
+            h = hashlib.sha256()
+            h.update(str((self.data.dtype.str, self.data.shape)).encode())
+            h.update(self.data.tobytes())
+            h.update(self.spacing.tobytes() + self.origin.tobytes())
+            h.update(b"mask" if self.mask_nonfinite else b"")
+            self._digest = h.hexdigest()
+        return self._digest
+
+    def __repr__(self):
+        return (f"Volume(shape={self.shape}, dtype={self.data.dtype}, spacing={tuple(self.spacing.tolist())}, "
+                f"origin={tuple(self.origin.tolist())}, range={self.data_range})")
+
+
+def _control_points(name, points, width):
+    try:
+        arr = np.array(points, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise TypeError(f"{name} must be a list of {width}-tuples of numbers, got {points!r}") from None
+    if arr.ndim != 2 or arr.shape[1] != width or arr.shape[0] < 1:
+        raise ValueError(f"{name} must be a non-empty list of {width}-tuples, got {points!r}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} must be finite, got {points!r}")
+    pos = arr[:, 0]
+    if np.any(np.diff(pos) <= 0):
+        i = int(np.argmax(np.diff(pos) <= 0))
+        raise ValueError(f"{name} positions must be strictly increasing, got {pos[i]!r} then {pos[i + 1]!r}")
+    vals = arr[:, 1:]
+    if np.any(vals < 0) or np.any(vals > 1):
+        bad = vals[(vals < 0) | (vals > 1)][0]
+        raise ValueError(f"{name} values must lie in [0, 1], got {bad!r}")
+    arr.setflags(write=False)
+    return arr
+
+
+class TransferFunction:
+    """Piecewise-linear colour and opacity over data values (not normalised).
+
+    ``opacity`` is the opacity of a slab ``unit_distance`` thick (world units). Both
+    functions are linear between their control points and clamped to their end values.
+    """
+
+    def __init__(self, color, opacity, unit_distance=1.0):
+        self.color_points = _control_points("color", color, 4)
+        self.opacity_points = _control_points("opacity", opacity, 2)
+        self.unit_distance = _finite_number("unit_distance", unit_distance, positive=True)
+
+    def color(self, s):
+        """c(s), shape s.shape + (3,), float64."""
+        s = np.asarray(s, dtype=np.float64)
+        p = self.color_points
+        return np.stack([np.interp(s, p[:, 0], p[:, k]) for k in (1, 2, 3)], axis=-1)
+
+    def opacity(self, s):
+        """alpha(s), float64."""
+        s = np.asarray(s, dtype=np.float64)
+        return np.interp(s, self.opacity_points[:, 0], self.opacity_points[:, 1])
+
+    def extinction(self, s):
+        """tau(s) = -ln(1 - alpha(s)) / unit_distance; inf where alpha = 1."""
+        a = self.opacity(s)
+        with np.errstate(divide="ignore"):
+            return -np.log1p(-a) / self.unit_distance
+
+    @property
+    def knots(self):
+        """All control-point positions, sorted and unique."""
+        return np.unique(np.concatenate([self.color_points[:, 0], self.opacity_points[:, 0]]))
+
+    def key(self):
+        return (self.color_points.tobytes(), self.opacity_points.tobytes(), self.unit_distance)
+
+    def to_dict(self):
+        return {"color": self.color_points.tolist(), "opacity": self.opacity_points.tolist(),
+                "unit_distance": self.unit_distance}
+
+    def __repr__(self):
+        return (f"TransferFunction({len(self.color_points)} colour points, "
+                f"{len(self.opacity_points)} opacity points, unit_distance={self.unit_distance})")
+
+
+class Camera:
+    """A pinhole (``fov`` vertical, degrees) or orthographic (``ortho_height``) camera.
+
+    Rays start at the eye (perspective) or on the plane through the eye normal to the
+    view direction (orthographic); nothing behind that start is seen.
+    """
+
+    def __init__(self, eye, target, up=(0.0, 1.0, 0.0), fov=30.0, ortho_height=None):
+        self.eye = _vector3("eye", eye)
+        self.target = _vector3("target", target)
+        self.up = _vector3("up", up)
+        view = self.target - self.eye
+        dist = float(np.linalg.norm(view))
+        if dist <= 1e-12 * max(1.0, float(np.abs(self.eye).max())):
+            raise ValueError(f"eye must differ from target, both are {tuple(self.eye.tolist())}")
+        forward = view / dist
+        up_len = float(np.linalg.norm(self.up))
+        if up_len == 0:
+            raise ValueError(f"up must be a non-zero vector, got {tuple(self.up.tolist())}")
+        right = np.cross(forward, self.up / up_len)
+        if np.linalg.norm(right) < 1e-9:
+            raise ValueError(f"up {tuple(self.up.tolist())} is parallel to the view direction {tuple(forward.tolist())}")
+        right /= np.linalg.norm(right)
+        self.forward = forward
+        self.right = right
+        self.true_up = np.cross(right, forward)
+        self.distance = dist
+        if ortho_height is not None:
+            self.ortho_height = _finite_number("ortho_height", ortho_height, positive=True)
+            self.fov = None
+        else:
+            self.fov = _finite_number("fov", fov, positive=True)
+            if self.fov >= 180:
+                raise ValueError(f"fov must be below 180 degrees, got {fov!r}")
+            self.ortho_height = None
+
+    @property
+    def is_ortho(self):
+        return self.ortho_height is not None
+
+    def screen_scale(self, width, height):
+        """Half-extent of the view at unit distance (perspective) or in world units
+        (orthographic), as (x, y)."""
+        aspect = width / height
+        half_h = self.ortho_height / 2 if self.is_ortho else math.tan(math.radians(self.fov) / 2)
+        return half_h * aspect, half_h
+
+    def rays(self, width, height):
+        """Ray origins and unit directions, each (H, W, 3) float64, row 0 on top,
+        through pixel centres."""
+        sx, sy = self.screen_scale(width, height)
+        x = (2 * (np.arange(width) + 0.5) / width - 1) * sx
+        y = (1 - 2 * (np.arange(height) + 0.5) / height) * sy
+        xx, yy = np.meshgrid(x, y)
+        offset = xx[..., None] * self.right + yy[..., None] * self.true_up
+        if self.is_ortho:
+            origins = self.eye + offset
+            dirs = np.broadcast_to(self.forward, origins.shape).copy()
+        else:
+            dirs = self.forward + offset
+            dirs /= np.linalg.norm(dirs, axis=-1, keepdims=True)
+            origins = np.broadcast_to(self.eye, dirs.shape).copy()
+        return origins, dirs
+
+    def key(self):
+        return (self.eye.tobytes(), self.target.tobytes(), self.up.tobytes(), self.fov, self.ortho_height)
+
+    def __repr__(self):
+        proj = f"ortho_height={self.ortho_height}" if self.is_ortho else f"fov={self.fov}"
+        return f"Camera(eye={tuple(self.eye.tolist())}, target={tuple(self.target.tolist())}, up={tuple(self.up.tolist())}, {proj})"
+
+
+class Scene:
+    """What to render: a volume, its classification, a camera, an image size and a mode."""
+
+    def __init__(self, volume, tf, camera, width=512, height=512, mode="composite",
+                 iso_value=None, shading=False, phong=(0.3, 0.7, 0.2, 32.0)):
+        for name, value, cls in (("volume", volume, Volume), ("tf", tf, TransferFunction),
+                                 ("camera", camera, Camera)):
+            if not isinstance(value, cls):
+                raise TypeError(f"{name} must be a dvr_gl.{cls.__name__}, got {type(value).__name__}")
+        for name, value in (("width", width), ("height", height)):
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+                raise TypeError(f"{name} must be an integer, got {value!r}")
+            if not 1 <= value <= MAX_IMAGE_SIDE:
+                raise ValueError(f"{name} must be between 1 and {MAX_IMAGE_SIDE} pixels, got {value!r}")
+        if mode not in MODES:
+            raise ValueError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
+        if mode == "isosurface":
+            if iso_value is None:
+                raise ValueError("iso_value is required for mode='isosurface', got None")
+            iso_value = _finite_number("iso_value", iso_value)
+        elif iso_value is not None:
+            iso_value = _finite_number("iso_value", iso_value)
+        if not isinstance(shading, (bool, np.bool_)):
+            raise TypeError(f"shading must be True or False, got {shading!r}")
+        if shading and mode != "isosurface":
+            raise NotImplementedError(
+                f"shading=True for mode={mode!r} is not implemented yet (isosurface mode is always shaded)")
+        try:
+            phong = tuple(float(v) for v in phong)
+        except (TypeError, ValueError):
+            raise TypeError(f"phong must be (ka, kd, ks, shininess), got {phong!r}") from None
+        if len(phong) != 4 or not all(math.isfinite(v) and v >= 0 for v in phong):
+            raise ValueError(f"phong must be four finite non-negative numbers (ka, kd, ks, shininess), got {phong!r}")
+        self.volume = volume
+        self.tf = tf
+        self.camera = camera
+        self.width = int(width)
+        self.height = int(height)
+        self.mode = mode
+        self.iso_value = iso_value
+        self.shading = bool(shading)
+        self.phong = phong
+
+    @property
+    def shaded(self):
+        """True when samples are lit (isosurface mode always is)."""
+        return self.shading or self.mode == "isosurface"
+
+    def replace(self, **changes):
+        """A copy with some fields changed (validated again)."""
+        args = dict(volume=self.volume, tf=self.tf, camera=self.camera, width=self.width,
+                    height=self.height, mode=self.mode, iso_value=self.iso_value,
+                    shading=self.shading, phong=self.phong)
+        args.update(changes)
+        return Scene(**args)
+
+    def digest(self):
+        """A content hash of everything that defines the image."""
+        h = hashlib.sha256()
+        h.update(self.volume.digest().encode())
+        for part in (self.tf.key(), self.camera.key(),
+                     (self.width, self.height, self.mode, self.iso_value, self.shading, self.phong)):
+            h.update(repr(part).encode())
+        return h.hexdigest()
+
+    def __repr__(self):
+        return (f"Scene({self.volume!r}, {self.tf!r}, {self.camera!r}, {self.width}x{self.height}, "
+                f"mode={self.mode!r}, iso_value={self.iso_value})")
+
+
+def default_camera(volume, azimuth=0.0, elevation=0.0, zoom=1.0, fov=30.0, ortho=False):
+    """A camera looking at the centre of the volume's box along -z with +y up, far enough
+    that the box's bounding sphere fits the view; ``azimuth`` turns it about +y and then
+    ``elevation`` about the camera's right axis (degrees); ``zoom`` > 1 moves closer."""
+    zoom = _finite_number("zoom", zoom, positive=True)
+    azimuth = _finite_number("azimuth", azimuth)
+    elevation = _finite_number("elevation", elevation)
+    lo, hi = volume.bounds
+    centre = (lo + hi) / 2
+    radius = float(np.linalg.norm(hi - lo)) / 2
+    az, el = math.radians(azimuth), math.radians(elevation)
+    # Start looking along -z (eye on +z); rotate the eye offset and the up vector together.
+    offset = np.array([math.sin(az) * math.cos(el), math.sin(el), math.cos(az) * math.cos(el)])
+    up = np.array([-math.sin(az) * math.sin(el), math.cos(el), -math.cos(az) * math.sin(el)])
+    if ortho:
+        return Camera(centre + offset * 2 * radius, centre, up, ortho_height=2 * radius / zoom)
+    distance = radius / math.sin(math.radians(fov) / 2) / zoom
+    return Camera(centre + offset * distance, centre, up, fov=fov)
