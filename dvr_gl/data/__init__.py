@@ -1,0 +1,131 @@
+"""Bundled scenes: a real CT head and a synthetic volume with a known analytic form.
+
+- :func:`ct_head` -- the VTK "headsq" CT head at quarter resolution, 64 x 64 x 93 int16,
+  spacing (3.2, 3.2, 1.5), values 0..3926 (VTK Data, BSD-3-Clause style; origin and the
+  verbatim notice in ``LICENSE-headsq.txt`` beside this file).
+- :func:`synthetic` -- :func:`synthetic_field` sampled on an n^3 grid: a tilted Gaussian
+  torus (peak 1.0), a Gaussian blob in its hole (peak 0.6) and a smaller one outside it
+  (peak 0.35). The world box is always ``[0, 63]^3``, whatever ``n``: a finer grid samples
+  the same continuous field, so resolution studies compare like with like.
+
+Each comes with a default transfer function in data units whose unit distance is one
+voxel: the smallest spacing of the head (1.5), and 1.0 for the synthetic box (one voxel
+at the default ``n = 64``).
+
+Volumes are cached: calling :func:`ct_head` twice returns the same immutable object, so
+renderers that cache GPU resources by identity upload it once.
+"""
+
+from __future__ import annotations
+
+import functools
+import importlib.resources
+import math
+
+import numpy as np
+
+from ..scene import TransferFunction, Volume
+
+__all__ = ["ct_head", "ct_head_tf", "synthetic", "synthetic_field", "synthetic_tf",
+           "SYNTHETIC_EXTENT"]
+
+_HEADSQ_FILE = "headsq_quarter.npz"
+
+#: World size of the synthetic volume's box on every axis; the box is [0, SYNTHETIC_EXTENT]^3.
+SYNTHETIC_EXTENT = 63.0
+
+# The synthetic field's parts, in world units (box [0, 63]^3, centre 31.5).
+_CENTRE = np.array([31.5, 31.5, 31.5])
+_TORUS_RADIUS = 18.0            # major radius
+_TORUS_SIGMA = 2.5              # Gaussian width of the tube
+_TORUS_TILT = math.radians(35)  # its axis: +z turned towards +y about +x
+_TORUS_AXIS = np.array([0.0, math.sin(_TORUS_TILT), math.cos(_TORUS_TILT)])
+_BLOBS = (  # (centre offset from the box centre, sigma, peak)
+    (np.array([0.0, 0.0, 0.0]), 5.0, 0.6),
+    (np.array([10.0, 12.0, 14.0]), 3.5, 0.35),
+)
+
+
+@functools.lru_cache(maxsize=1)
+def ct_head() -> Volume:
+    """The VTK "headsq" CT head, quarter resolution: data (93, 64, 64) int16 (z, y, x),
+    spacing (3.2, 3.2, 1.5), origin (0, 0, 0), values 0..3926."""
+    with importlib.resources.files(__name__).joinpath(_HEADSQ_FILE).open("rb") as f:
+        with np.load(f, allow_pickle=False) as npz:
+            data = npz["data"].astype(np.int16)  # native byte order
+            spacing = tuple(float(v) for v in npz["spacing"])
+            origin = tuple(float(v) for v in npz["origin"])
+    return Volume(data, spacing=spacing, origin=origin)
+
+
+def ct_head_tf() -> TransferFunction:
+    """Skin faint and warm, bone opaque and ivory, air and everything below 500 clear.
+
+    Data units (CT values of this data set: air ~0-200, soft tissue ~900-1100, bone
+    ~1200-2600); unit distance 1.5, the head's smallest spacing (one voxel along z).
+    """
+    return TransferFunction(
+        color=[(500.0, 0.55, 0.25, 0.15),
+               (1000.0, 0.88, 0.60, 0.48),
+               (1250.0, 1.00, 0.93, 0.82),
+               (2500.0, 1.00, 1.00, 0.96)],
+        opacity=[(500.0, 0.0),
+                 (900.0, 0.012),
+                 (1150.0, 0.02),
+                 (1400.0, 0.35),
+                 (2500.0, 0.8)],
+        unit_distance=1.5)
+
+
+def synthetic_field(x, y, z):
+    """The synthetic scalar field at world points (arrays broadcast), float64.
+
+    A Gaussian tube (sigma 3) around a circle of radius 15 centred in the box, its axis
+    tilted 35 degrees from +z towards +y, peak 1.0; a Gaussian blob (sigma 5, peak 0.6) at
+    the box centre; one (sigma 3.5, peak 0.35) at centre + (8, 10, 12), above the torus
+    plane. The parts barely overlap (the field's maximum is about 1.007) and the field is
+    below 1e-6 on the faces of the box [0, 63]^3.
+    """
+    p = np.stack(np.broadcast_arrays(np.asarray(x, np.float64), np.asarray(y, np.float64),
+                                     np.asarray(z, np.float64)), axis=-1) - _CENTRE
+    h = p @ _TORUS_AXIS                                   # height above the torus plane
+    r = np.sqrt(np.maximum((p * p).sum(axis=-1) - h * h, 0.0))  # distance from the axis
+    f = np.exp(-((r - _TORUS_RADIUS) ** 2 + h * h) / (2 * _TORUS_SIGMA ** 2))
+    for offset, sigma, peak in _BLOBS:
+        q = p - offset
+        f = f + peak * np.exp(-(q * q).sum(axis=-1) / (2 * sigma ** 2))
+    return f
+
+
+def synthetic(n: int = 64) -> Volume:
+    """:func:`synthetic_field` sampled on an n x n x n grid spanning [0, 63]^3
+    (spacing 63 / (n - 1)), float32."""
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)):
+        raise TypeError(f"n must be an integer, got {n!r}")
+    if not 2 <= n <= 1024:
+        raise ValueError(f"n must be between 2 and 1024 samples per axis, got {n!r}")
+    return _synthetic(int(n))
+
+
+@functools.lru_cache(maxsize=4)
+def _synthetic(n):
+    h = SYNTHETIC_EXTENT / (n - 1)
+    axis = np.arange(n) * h
+    z, y, x = np.meshgrid(axis, axis, axis, indexing="ij")  # (nz, ny, nx), x fastest
+    data = synthetic_field(x, y, z).astype(np.float32)
+    return Volume(data, spacing=(h, h, h), origin=(0.0, 0.0, 0.0))
+
+
+def synthetic_tf() -> TransferFunction:
+    """Blue-cyan small blob (0.35), amber centre blob (0.6), red torus (1.0); values
+    below 0.1 clear. Unit distance 1.0 (one voxel at n = 64)."""
+    return TransferFunction(
+        color=[(0.10, 0.15, 0.25, 0.90),
+               (0.35, 0.15, 0.80, 0.95),
+               (0.60, 0.98, 0.75, 0.15),
+               (1.00, 0.90, 0.15, 0.10)],
+        opacity=[(0.10, 0.0),
+                 (0.30, 0.10),
+                 (0.60, 0.25),
+                 (1.00, 0.60)],
+        unit_distance=1.0)

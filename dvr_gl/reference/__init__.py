@@ -1,0 +1,33 @@
+"""NumPy references (same plan as the GL path, float64) and the exact image."""
+
+from __future__ import annotations
+
+from ..techniques import get_technique
+
+
+def render(scene, technique="raycast", step=None, *, lut_exact=False, **options):
+    """The NumPy reference image of ``technique`` for ``scene``: the same sample positions,
+    order and tables as the shader, in float64. Options as for ``Renderer.render``.
+    ``lut_exact=True`` classifies with the exact transfer function instead of its lookup
+    table. Returns (H, W, 4) float64, premultiplied RGBA, row 0 on top."""
+    import importlib
+    plan = get_technique(technique).make_plan(scene, step, **options)
+    module = importlib.import_module(f"{__name__}.{technique}")
+    image = module.render_plan(plan, lut_exact=lut_exact)
+    if plan.target == "rgba8":
+        image = quantize_unorm8(image)
+    elif plan.target == "rgba16f":
+        image = image.astype("float16").astype("float64")
+    return image
+
+
+def quantize_unorm8(image):
+    """What an 8-bit normalised target stores: round(clamp(x) * 255) / 255."""
+    import numpy as np
+    return np.round(np.clip(image, 0, 1) * 255) / 255
+
+
+def exact(scene, **kwargs):
+    """The exact image of the contract; see ``dvr_gl.reference.exact.exact``."""
+    from .exact import exact as _exact
+    return _exact(scene, **kwargs)

@@ -1,0 +1,64 @@
+"""Small caches keyed by the identity of scene objects (which are immutable)."""
+
+from __future__ import annotations
+
+from collections import OrderedDict
+
+
+class IdentityKey:
+    """Hashable by the identity of the objects it holds; holding them keeps ``id``s from
+    being reused while the entry lives."""
+
+    __slots__ = ("objects",)
+
+    def __init__(self, *objects):
+        self.objects = objects
+
+    def __hash__(self):
+        return hash(tuple(id(o) if not isinstance(o, str) else o for o in self.objects))
+
+    def __eq__(self, other):
+        return (isinstance(other, IdentityKey) and len(other.objects) == len(self.objects)
+                and all(a is b or (isinstance(a, str) and a == b) for a, b in zip(self.objects, other.objects)))
+
+
+class LRU:
+    """At most ``capacity`` values; ``release`` is called on values that are dropped, if
+    they have it (GL objects)."""
+
+    def __init__(self, capacity):
+        self.capacity = capacity
+        self.items = OrderedDict()
+
+    def get(self, key, make):
+        if key in self.items:
+            self.items.move_to_end(key)
+            return self.items[key]
+        value = make()
+        self.items[key] = value
+        while len(self.items) > self.capacity:
+            _, old = self.items.popitem(last=False)
+            _release(old)
+        return value
+
+    def release(self):
+        for value in self.items.values():
+            _release(value)
+        self.items.clear()
+
+
+def _release(value):
+    release = getattr(value, "release", None)
+    if release is not None:
+        release()
+
+
+class TableCache:
+    """CPU tables derived from one scene object (a TF's lookup table, a volume's brick
+    value ranges): built on first use, reused while the object lives in the cache."""
+
+    def __init__(self, capacity=4):
+        self._lru = LRU(capacity)
+
+    def get(self, kind, obj, make):
+        return self._lru.get(IdentityKey(kind, obj), lambda: make(obj))

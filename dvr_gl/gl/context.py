@@ -1,0 +1,158 @@
+"""The one place GL contexts are made.
+
+``backend="auto"`` tries EGL (moderngl's ``egl`` backend, Mesa's llvmpipe or a GPU driver)
+and then OSMesa (libOSMesa through the small ctypes loader below); ``"egl"`` and
+``"osmesa"`` force one. A failure says what was tried, why each failed, and what to
+install. Contexts are OpenGL 3.3 core or newer.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+
+import moderngl
+
+BACKENDS = ("egl", "osmesa")
+REQUIRED_GL = 330
+
+INSTALL_HINT = {
+    "egl": "install Mesa's EGL (Debian/Ubuntu: apt-get install libegl1 libegl-mesa0 libgl1-mesa-dri)",
+    "osmesa": "install OSMesa (Debian/Ubuntu: apt-get install libosmesa6)",
+}
+
+
+class BackendUnavailable(RuntimeError):
+    """No requested GL backend could make a context."""
+
+
+class _OSMesaLoader:
+    """A moderngl context loader over libOSMesa: makes a core-profile context current on
+    a 1x1 RGBA buffer (dvr_gl always renders into its own framebuffer objects) and
+    resolves GL entry points with OSMesaGetProcAddress."""
+
+    OSMESA_RGBA = 0x1908
+    OSMESA_FORMAT = 0x22
+    OSMESA_DEPTH_BITS = 0x30
+    OSMESA_STENCIL_BITS = 0x31
+    OSMESA_ACCUM_BITS = 0x32
+    OSMESA_PROFILE = 0x33
+    OSMESA_CORE_PROFILE = 0x34
+    OSMESA_CONTEXT_MAJOR_VERSION = 0x36
+    OSMESA_CONTEXT_MINOR_VERSION = 0x37
+    GL_UNSIGNED_BYTE = 0x1401
+
+    _LIB_NAMES = ("libOSMesa.so.8", "libOSMesa.so.6", "libOSMesa.so")
+
+    def __init__(self):
+        lib = None
+        errors = []
+        names = list(self._LIB_NAMES)
+        found = ctypes.util.find_library("OSMesa")
+        if found:
+            names.insert(0, found)
+        for name in names:
+            try:
+                lib = ctypes.CDLL(name)
+                break
+            except OSError as e:
+                errors.append(str(e))
+        if lib is None:
+            raise OSError("libOSMesa not found (" + "; ".join(errors[-1:]) + ")")
+        self._lib = lib
+        lib.OSMesaCreateContextAttribs.restype = ctypes.c_void_p
+        lib.OSMesaCreateContextAttribs.argtypes = [ctypes.POINTER(ctypes.c_int), ctypes.c_void_p]
+        lib.OSMesaMakeCurrent.restype = ctypes.c_ubyte
+        lib.OSMesaMakeCurrent.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_uint,
+                                          ctypes.c_int, ctypes.c_int]
+        lib.OSMesaGetProcAddress.restype = ctypes.c_void_p
+        lib.OSMesaGetProcAddress.argtypes = [ctypes.c_char_p]
+        lib.OSMesaGetCurrentContext.restype = ctypes.c_void_p
+        lib.OSMesaDestroyContext.argtypes = [ctypes.c_void_p]
+        attribs = [self.OSMESA_FORMAT, self.OSMESA_RGBA, self.OSMESA_DEPTH_BITS, 24,
+                   self.OSMESA_STENCIL_BITS, 8, self.OSMESA_ACCUM_BITS, 0,
+                   self.OSMESA_PROFILE, self.OSMESA_CORE_PROFILE,
+                   self.OSMESA_CONTEXT_MAJOR_VERSION, REQUIRED_GL // 100,
+                   self.OSMESA_CONTEXT_MINOR_VERSION, (REQUIRED_GL // 10) % 10, 0]
+        arr = (ctypes.c_int * len(attribs))(*attribs)
+        self._ctx = lib.OSMesaCreateContextAttribs(arr, None)
+        if not self._ctx:
+            raise OSError(f"OSMesaCreateContextAttribs failed for a {REQUIRED_GL / 100:.1f} core profile")
+        self._buffer = (ctypes.c_ubyte * 4)()
+        self._make_current()
+
+    def _make_current(self):
+        if not self._lib.OSMesaMakeCurrent(self._ctx, self._buffer, self.GL_UNSIGNED_BYTE, 1, 1):
+            raise OSError("OSMesaMakeCurrent failed")
+
+    # -- the interface moderngl expects of a loader ----------------------------------
+    def load_opengl_function(self, name):
+        return self._lib.OSMesaGetProcAddress(name.encode()) or 0
+
+    def __enter__(self):
+        self._make_current()
+
+    def __exit__(self, *exc):
+        pass
+
+    def release(self):
+        if self._ctx:
+            self._lib.OSMesaDestroyContext(self._ctx)
+            self._ctx = None
+
+
+def _create_egl():
+    return moderngl.create_context(standalone=True, backend="egl", require=REQUIRED_GL)
+
+
+def _create_osmesa():
+    loader = _OSMesaLoader()
+    ctx = moderngl.Context.__new__(moderngl.Context)
+    ctx.mglo, ctx.version_code = moderngl.mgl.create_context(context=loader)
+    ctx._info = None
+    ctx._extensions = None
+    ctx.extra = None
+    ctx._gc_mode = None
+    ctx._objects = __import__("collections").deque()
+    ctx._screen = None
+    ctx.fbo = None
+    if ctx.version_code < REQUIRED_GL:
+        raise OSError(f"OSMesa gave OpenGL {ctx.version_code}, dvr_gl needs {REQUIRED_GL} or newer")
+    ctx.extra = {"osmesa_loader": loader}
+    return ctx
+
+
+_CREATORS = {"egl": _create_egl, "osmesa": _create_osmesa}
+
+
+def create_context(backend="auto"):
+    """A headless moderngl context and the name of the backend that made it."""
+    if backend == "auto":
+        order = BACKENDS
+    elif backend in BACKENDS:
+        order = (backend,)
+    else:
+        raise ValueError(f"backend must be 'auto', 'egl' or 'osmesa', got {backend!r}")
+    failures = []
+    for name in order:
+        try:
+            ctx = _CREATORS[name]()
+        except Exception as e:  # each backend fails in its own way; report them all
+            failures.append(f"  {name}: {type(e).__name__}: {e}\n    fix: {INSTALL_HINT[name]}")
+            continue
+        return ctx, name
+    raise BackendUnavailable("no OpenGL 3.3 core context could be created; tried:\n" + "\n".join(failures))
+
+
+def describe(ctx) -> dict:
+    """Renderer strings, GL version and the limits dvr_gl cares about."""
+    info = ctx.info
+    return {
+        "vendor": info.get("GL_VENDOR"),
+        "renderer": info.get("GL_RENDERER"),
+        "version": info.get("GL_VERSION"),
+        "version_code": ctx.version_code,
+        "max_texture_size": info.get("GL_MAX_TEXTURE_SIZE"),
+        "max_3d_texture_size": info.get("GL_MAX_3D_TEXTURE_SIZE"),
+        "max_viewport_dims": info.get("GL_MAX_VIEWPORT_DIMS"),
+    }

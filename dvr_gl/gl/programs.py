@@ -1,0 +1,117 @@
+"""GLSL sources: loading from ``shaders/``, ``#include`` resolution, feature defines, and
+a program cache keyed by (files, defines).
+
+Include rules: ``#include "common/x.glsl"`` is resolved against the shader root, each file
+is inlined at most once per program (include guards are still written in the files, for
+readers), circular includes are an error, and ``#line`` directives keep compiler messages
+pointing at real line numbers (the file is named in a ``// --- start of`` marker).
+
+Defines: every switch a shader accepts is declared in its files as
+``#ifndef NAME / #define NAME default / #endif``; the loader writes the chosen values
+right after ``#version`` and refuses names no included file declares.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+_INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$')
+_DECLARED = re.compile(r"^\s*#ifndef\s+([A-Z_][A-Z0-9_]*)\s*$", re.M)
+
+
+def shader_root() -> Path:
+    """``shaders/`` beside the package in a source checkout, ``dvr_gl/shaders`` in a wheel."""
+    here = Path(__file__).resolve().parent.parent
+    for candidate in (here / "shaders", here.parent / "shaders"):
+        if (candidate / "common").is_dir():
+            return candidate
+    raise FileNotFoundError(f"dvr_gl shader folder not found next to {here}")
+
+
+class ShaderSourceError(ValueError):
+    pass
+
+
+def resolve_includes(name: str, root: Path | None = None, _stack=None, _seen=None) -> str:
+    """The text of shader ``name`` with its includes inlined (each file once)."""
+    root = root or shader_root()
+    stack = _stack if _stack is not None else []
+    seen = _seen if _seen is not None else set()
+    if name in stack:
+        raise ShaderSourceError("circular #include: " + " -> ".join(stack + [name]))
+    path = root / name
+    if not path.is_file():
+        raise ShaderSourceError(f"shader file {name!r} not found under {root}")
+    seen.add(name)
+    stack.append(name)
+    out = [f"// --- start of \"{name}\" ---"] if len(stack) > 1 else []
+    lines = path.read_text().splitlines()
+    for lineno, line in enumerate(lines, start=1):
+        m = _INCLUDE.match(line)
+        if not m:
+            out.append(line)
+            continue
+        child = m.group(1)
+        if child in stack:
+            raise ShaderSourceError("circular #include: " + " -> ".join(stack + [child]))
+        if child not in seen:
+            out.append(resolve_includes(child, root, stack, seen))
+            out.append(f"#line {lineno + 1}")
+    if len(stack) > 1:
+        out.append(f"// --- end of \"{name}\" ---")
+    stack.pop()
+    return "\n".join(out)
+
+
+def declared_switches(source: str) -> set:
+    return set(_DECLARED.findall(source))
+
+
+def apply_defines(source: str, defines: dict) -> str:
+    """Insert ``#define NAME value`` lines after ``#version``; unknown names raise."""
+    lines = source.split("\n")
+    at = next((i for i, line in enumerate(lines) if line.startswith("#version")), None)
+    if at is None:
+        raise ShaderSourceError("a shader needs a #version line")
+    known = declared_switches(source)
+    unknown = sorted(set(defines) - known)
+    if unknown:
+        raise ShaderSourceError(f"unknown shader switches {unknown}; this shader declares {sorted(known)}")
+    header = [f"#define {k} {int(v) if isinstance(v, bool) else v}" for k, v in sorted(defines.items())]
+    return "\n".join(lines[:at + 1] + header + [f"#line {at + 2}"] + lines[at + 1:])
+
+
+def build_source(name: str, defines: dict | None = None) -> str:
+    return apply_defines(resolve_includes(name), defines or {})
+
+
+class ProgramCache:
+    """Compiled programs per context, keyed by the shader files and the define set."""
+
+    def __init__(self, ctx):
+        self.ctx = ctx
+        self._programs = {}
+        self.sources = {}  # key -> (vertex source, fragment source), for tests and debugging
+
+    def get(self, vertex: str, fragment: str, defines: dict | None = None):
+        defines = dict(defines or {})
+        key = (vertex, fragment, tuple(sorted(defines.items())))
+        prog = self._programs.get(key)
+        if prog is None:
+            vs = build_source(vertex, _only_declared(vertex, defines))
+            fs = build_source(fragment, defines)
+            prog = self.ctx.program(vertex_shader=vs, fragment_shader=fs)
+            self._programs[key] = prog
+            self.sources[key] = (vs, fs)
+        return prog
+
+    def release(self):
+        for prog in self._programs.values():
+            prog.release()
+        self._programs.clear()
+
+
+def _only_declared(name, defines):
+    known = declared_switches(resolve_includes(name))
+    return {k: v for k, v in defines.items() if k in known}

@@ -1,0 +1,160 @@
+"""NumPy reference of the ray caster: the same plan (rays, segments, jitter table, lookup
+table, early termination) as ``shaders/raycast/raycast.frag``, in float64.
+
+Empty-space skipping is not repeated here: it only leaves out segments whose opacity is
+exactly zero, so the image is the same without it (a GL test checks that claim).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .common import (cell_is_valid, composite_front_to_back, correct_opacity, ray_box, trilinear,
+                     world_to_index)
+from .shading import gradient, gradient_epsilon, shade_blinn_phong
+
+ISO_BISECTION_STEPS = 16  # as ISO_BISECTION_STEPS in shaders/common/isosurface.glsl
+
+
+def _jitter_per_pixel(plan, height, width):
+    """The jitter table as the shader reads it: texel (x, y) = (column, row from the
+    bottom) modulo the table size."""
+    if plan.jitter is None:
+        return np.zeros((height, width))
+    size_y, size_x = plan.jitter.shape
+    rows_from_bottom = (height - 1 - np.arange(height)) % size_y
+    cols = np.arange(width) % size_x
+    return plan.jitter[rows_from_bottom[:, None], cols[None, :]].astype(np.float64)
+
+
+def refine_iso_bisection(sample, ta, tb, iso, steps=ISO_BISECTION_STEPS):
+    """Twin of ``refineIsoBisection``: ``sample(t)`` gives field values at ray distances."""
+    above_a = sample(ta) >= iso
+    for _ in range(steps):
+        tm = 0.5 * (ta + tb)
+        above_m = sample(tm) >= iso
+        ta = np.where(above_m == above_a, tm, ta)
+        tb = np.where(above_m == above_a, tb, tm)
+    return 0.5 * (ta + tb)
+
+
+def render_plan(plan, lut_exact=False):
+    """The reference image of a ray-casting plan, (H, W, 4) float64.
+
+    ``lut_exact=True`` classifies with the exact piecewise-linear transfer function
+    instead of the lookup table (the ideal float64 midpoint marcher)."""
+    scene = plan.scene
+    volume, tf, cam = scene.volume, scene.tf, scene.camera
+    H, W = scene.height, scene.width
+    values = volume.values(np.float64)
+    lo, _ = volume.bounds
+
+    if lut_exact:
+        def classify(s):
+            return np.concatenate([tf.color(s), tf.opacity(s)[..., None]], axis=-1)
+    else:
+        classify = plan.lut.lookup
+
+    origins, dirs = cam.rays(W, H)
+    origins = (origins - lo).reshape(-1, 3)
+    dirs = dirs.reshape(-1, 3)
+    t0, t1 = ray_box(origins, dirs, np.zeros(3), volume.extent)
+    jitter = _jitter_per_pixel(plan, H, W).reshape(-1)
+    n = origins.shape[0]
+    out = np.zeros((n, 4))
+    hit = np.nonzero(t1 > t0)[0]
+    o, d, t0, t1, jitter = origins[hit], dirs[hit], t0[hit], t1[hit], jitter[hit]
+    step, inv_unit = plan.step, 1.0 / tf.unit_distance
+
+    def sample(t, rows=slice(None)):
+        p = o[rows] + np.asarray(t)[..., None] * d[rows]
+        return trilinear(values, p / volume.spacing)
+
+    def valid(t, rows=slice(None)):
+        p = o[rows] + t[..., None] * d[rows]
+        return cell_is_valid(volume, world_to_index(volume, p + lo))
+
+    m = len(hit)
+    mode = scene.mode
+    color = np.zeros((m, 3))
+    trans = np.ones(m)
+    s_best = np.full(m, -np.inf if mode == "mip" else np.inf)
+    s_sum = np.zeros(m)
+    len_sum = np.zeros(m)
+    alive = np.ones(m, bool)
+    have_prev = np.zeros(m, bool)
+    above_prev = np.zeros(m, bool)
+    t_prev = t0.copy()
+    t_hit = np.full(m, -1.0)
+
+    for k in range(-1, plan.max_segments):
+        a = np.maximum(t0 + (jitter + k) * step, t0)
+        b = np.minimum(t0 + (jitter + k + 1) * step, t1)
+        alive &= a < t1
+        if not alive.any():
+            break
+        active = alive & (b - a > 0)
+        if volume.has_nonfinite:
+            active &= valid(0.5 * (a + b))
+        rows = np.nonzero(active)[0]
+        if rows.size == 0:
+            continue
+        a, b = a[rows], b[rows]
+        length = b - a
+        tm = 0.5 * (a + b)
+        s = sample(tm, rows)
+        if mode == "composite":
+            rgba = classify(s)
+            alpha = correct_opacity(rgba[:, 3], length * inv_unit)
+            color[rows], trans[rows] = composite_front_to_back(color[rows], trans[rows], rgba[:, :3], alpha)
+            stop = trans[rows] <= 0
+            if plan.ert_transmittance > 0:
+                stop |= trans[rows] < plan.ert_transmittance
+            alive[rows[stop]] = False
+        elif mode == "mip":
+            s_best[rows] = np.maximum(s_best[rows], s)
+        elif mode == "minip":
+            s_best[rows] = np.minimum(s_best[rows], s)
+        elif mode == "average":
+            s_sum[rows] += s * length
+            len_sum[rows] += length
+        else:  # isosurface
+            first = ~have_prev[rows]
+            if first.any():
+                r = rows[first]
+                above_prev[r] = sample(a[first], r) >= scene.iso_value
+                t_prev[r] = a[first]
+                have_prev[r] = True
+            above = s >= scene.iso_value
+            crossed = above != above_prev[rows]
+            if crossed.any():
+                r = rows[crossed]
+                t_hit[r] = refine_iso_bisection(lambda t: sample(t, r), t_prev[r], tm[crossed], scene.iso_value)
+                alive[r] = False
+            t_prev[rows[~crossed]] = tm[~crossed]
+
+    result = np.zeros((m, 4))
+    if mode == "composite":
+        result[:, :3] = color
+        result[:, 3] = 1 - trans
+    elif mode in ("mip", "minip", "average"):
+        if mode == "average":
+            ok = len_sum > 0
+            s_final = np.where(ok, s_sum / np.where(ok, len_sum, 1), 0)
+        else:
+            ok = np.isfinite(s_best)
+            s_final = np.where(ok, s_best, 0)
+        rgba = classify(s_final)
+        result[:, :3] = rgba[:, :3] * rgba[:, 3:4]
+        result[:, 3] = rgba[:, 3]
+        result[~ok] = 0
+    else:
+        ok = t_hit >= 0
+        if ok.any():
+            p = o[ok] + t_hit[ok, None] * d[ok] + lo
+            rgb = np.broadcast_to(classify(np.array([scene.iso_value]))[0, :3], (ok.sum(), 3))
+            g = gradient(volume, values, p)
+            result[ok, :3] = shade_blinn_phong(rgb, g, d[ok], scene.phong, gradient_epsilon(volume))
+            result[ok, 3] = 1.0
+    out[hit] = result
+    return out.reshape(H, W, 4)

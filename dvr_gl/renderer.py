@@ -1,0 +1,149 @@
+"""The GL renderer: one headless context, its program cache, and the GPU resources
+scenes need (made on first use, kept while the scene's objects live, never per frame)."""
+
+from __future__ import annotations
+
+from collections import OrderedDict
+
+import numpy as np
+
+from .gl.context import create_context, describe
+from .gl.programs import ProgramCache
+from .cache import LRU, IdentityKey as _Key, TableCache
+from .techniques import get_technique
+
+
+class Renderer:
+    """Renders scenes with GLSL techniques into float images.
+
+    >>> with Renderer(backend="auto") as r:          # doctest: +SKIP
+    ...     img = r.render(scene, technique="raycast", step=None)
+
+    ``img`` is (H, W, 4) float32 premultiplied RGBA, row 0 on top. The first render of a
+    scene compiles and uploads; later ones reuse the programs, textures and targets.
+    """
+
+    def __init__(self, backend="auto"):
+        self.ctx, self.backend = create_context(backend)
+        self.programs = ProgramCache(self.ctx)
+        self.created = []  # a log of ("texture kind", shape) for every texture made
+        self._volumes = LRU(2)
+        self._tfs = LRU(4)
+        self._occupancy = LRU(4)
+        self._masks = LRU(2)
+        self._small = {}
+        self._targets = LRU(3)
+        self._vbos = {}
+        self._vaos = {}
+        self.tables = TableCache()
+        self._released = False
+
+    # -- lifetime ---------------------------------------------------------------------
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.release()
+
+    def release(self):
+        if self._released:
+            return
+        self._released = True
+        with self.ctx:
+            for cache in (self._volumes, self._tfs, self._occupancy, self._masks, self._targets):
+                cache.release()
+            for obj in list(self._small.values()) + list(self._vaos.values()) + list(self._vbos.values()):
+                obj.release()
+            self.programs.release()
+        self.ctx.release()
+        loader = (self.ctx.extra or {}).get("osmesa_loader")
+        if loader is not None:
+            loader.release()
+
+    def info(self) -> dict:
+        return dict(describe(self.ctx), backend=self.backend)
+
+    # -- rendering --------------------------------------------------------------------
+    def render(self, scene, technique="raycast", step=None, **options):
+        """Render ``scene``; see the technique's module for its options."""
+        if self._released:
+            raise RuntimeError("this Renderer has been released")
+        tech = get_technique(technique)
+        with self.ctx:
+            plan = tech.make_plan(scene, step, tables=self.tables, **options)
+            return tech.draw(self, plan)
+
+    # -- resources (used by techniques) -------------------------------------------------
+    def _texture3d(self, kind, array, components, dtype, linear):
+        nz, ny, nx = array.shape[:3]
+        tex = self.ctx.texture3d((nx, ny, nz), components, np.ascontiguousarray(array).tobytes(), dtype=dtype)
+        f = self.ctx.LINEAR if linear else self.ctx.NEAREST
+        tex.filter = (f, f)
+        tex.repeat_x = tex.repeat_y = tex.repeat_z = False
+        self.created.append((kind, array.shape))
+        return tex
+
+    def volume_texture(self, volume):
+        """The samples as float32 in data units: exact for 8- and 16-bit integers."""
+        return self._volumes.get(_Key(volume), lambda: self._texture3d(
+            "volume", volume.values(np.float32), 1, "f4", linear=True))
+
+    def cell_valid_texture(self, volume):
+        return self._masks.get(_Key(volume), lambda: self._texture3d(
+            "cell_valid", volume.cell_valid.astype(np.uint8) * 255, 1, "f1", linear=False))
+
+    def occupancy_texture(self, volume, tf, occupancy):
+        return self._occupancy.get(_Key(volume, tf), lambda: self._texture3d(
+            "occupancy", occupancy.astype(np.uint8) * 255, 1, "f1", linear=False))
+
+    def tf_texture(self, lut):
+        def make():
+            tex = self.ctx.texture((lut.size, 1), 4, lut.table.tobytes(), dtype="f4")
+            tex.filter = (self.ctx.NEAREST, self.ctx.NEAREST)
+            self.created.append(("tf", lut.table.shape))
+            return tex
+        return self._tfs.get(_Key(lut, "texture"), make)
+
+    def small_texture(self, kind, table):
+        """A 2-D float32 table (jitter offsets), re-uploaded only when its values change."""
+        key = (kind, table.shape, table.tobytes())
+        tex = self._small.get(key)
+        if tex is None:
+            tex = self.ctx.texture((table.shape[1], table.shape[0]), 1, table.astype("f4").tobytes(), dtype="f4")
+            tex.filter = (self.ctx.NEAREST, self.ctx.NEAREST)
+            self.created.append((kind, table.shape))
+            self._small[key] = tex
+        return tex
+
+    def target(self, width, height, dtype):
+        def make():
+            tex = self.ctx.texture((width, height), 4, dtype=dtype)
+            self.created.append(("target", (height, width, dtype)))
+            return _Target(self.ctx.framebuffer([tex]), tex)
+        return self._targets.get((width, height, dtype), make).fbo
+
+    def read_target(self, fbo, width, height):
+        """Read back as float32 (GL finishes before this returns), row 0 on top."""
+        data = fbo.read(viewport=(0, 0, width, height), components=4, dtype="f4")
+        return np.frombuffer(data, np.float32).reshape(height, width, 4)[::-1].copy()
+
+    def proxy_vao(self, prog, kind):
+        from .techniques.raycast import PROXY_MESHES
+        vbo = self._vbos.get(kind)
+        if vbo is None:
+            vbo = self._vbos[kind] = self.ctx.buffer(PROXY_MESHES[kind]().tobytes())
+        key = (prog.glo, kind)
+        vao = self._vaos.get(key)
+        if vao is None:
+            vao = self._vaos[key] = self.ctx.vertex_array(prog, [(vbo, "3f", "a_position")])
+        return vao
+
+
+class _Target:
+    def __init__(self, fbo, tex):
+        self.fbo = fbo
+        self.tex = tex
+
+    def release(self):
+        self.fbo.release()
+        self.tex.release()

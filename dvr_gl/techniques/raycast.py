@@ -1,0 +1,284 @@
+"""Single-pass ray casting.
+
+About this technique
+--------------------
+The proxy geometry is the volume box's back faces (front faces culled, so each pixel runs
+the fragment shader once even with the eye close to the box), or one full-screen
+triangle when the eye is inside or nearly on the box. The fragment shader ignores the
+proxy's interpolated values: it rebuilds the pixel-centre ray from ``gl_FragCoord`` and
+the camera basis, so pixels match the NumPy reference's rays exactly in construction.
+
+Each ray is clipped to the box ``[t0, t1]`` (t0 >= 0: rays start at the eye, or on the
+plane through it for orthographic cameras) and cut into segments ``step`` long,
+starting at ``t0`` (or at ``t0 + jitter * step`` with a partial first segment), the last
+segment shorter. Each segment is sampled at its midpoint and composited with its true
+length: the midpoint rule, second order in ``step``.
+
+Positions are world units relative to the box's lower corner (computed in float64 on the
+CPU), which keeps float32 precision independent of where the volume sits in the world.
+Texel centres are the samples: texture coordinate ``(p / spacing + 0.5) / n``.
+
+Options (same names in ``dvr_gl.reference.render``)
+---------------------------------------------------
+target : "rgba32f" (default) | "rgba16f" | "rgba8" render target.
+jitter_seed : None, or an int: the ray start is offset by a fraction of a step taken from
+    a 64x64 table of uniform numbers drawn from ``numpy.random.default_rng(seed)`` and
+    tiled over the image (uploaded as a texture; the reference reads the same table).
+ert_transmittance : early ray termination once the transmittance falls below this
+    (0 disables; composite mode only). Everything behind the stop point could at most
+    have added colour ``c * T <= T`` per channel and opacity ``T``, so the dropped light
+    is below ``ert_transmittance`` in every channel of the pixel.
+skip_empty : empty-space skipping (composite mode only). The volume is cut into bricks
+    of ``BRICK`` cells; each brick's value range (with a one-sample margin, so rounding in
+    the texture unit cannot leave it) is classified once per transfer function; segments
+    whose midpoint lies in a brick whose range has zero opacity everywhere contribute
+    exactly nothing and are jumped over. The image is identical with it on and off.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..cache import TableCache
+from ..reference.shading import gradient_epsilon
+from ..scene import Scene
+from ..transfer import LookupTable
+
+BRICK = 8            # brick edge in cells, for empty-space skipping
+JITTER_TABLE = 64    # jitter table edge in pixels
+TARGETS = {"rgba32f": "f4", "rgba16f": "f2", "rgba8": "f1"}
+
+
+@dataclass
+class RaycastPlan:
+    """Everything both the GL path and the NumPy reference need, decided once."""
+    scene: Scene
+    step: float
+    lut: LookupTable
+    target: str = "rgba32f"
+    jitter: np.ndarray | None = None       # (64, 64) float32 in [0, 1), or None
+    ert_transmittance: float = 0.0
+    occupancy: np.ndarray | None = None    # (bz, by, bx) bool, or None when not skipping
+    defines: dict = field(default_factory=dict)
+
+    @property
+    def max_segments(self):
+        diagonal = float(np.linalg.norm(self.scene.volume.extent))
+        return int(math.ceil(diagonal / self.step)) + 2
+
+
+def default_step(volume):
+    """Half the smallest spacing."""
+    return 0.5 * volume.min_spacing
+
+
+def make_plan(scene, step=None, *, target="rgba32f", jitter_seed=None, ert_transmittance=1e-3,
+              skip_empty=True, tables=None):
+    """Validate the options and decide what the scene needs. ``tables`` (a
+    ``dvr_gl.cache.TableCache``) keeps the TF's lookup table and the volume's brick
+    ranges between frames."""
+    tables = tables or TableCache()
+    if not isinstance(scene, Scene):
+        raise TypeError(f"scene must be a dvr_gl.Scene, got {type(scene).__name__}")
+    if step is None:
+        step = default_step(scene.volume)
+    if isinstance(step, bool) or not isinstance(step, (int, float, np.floating, np.integer)):
+        raise TypeError(f"step must be a number (world units), got {step!r}")
+    step = float(step)
+    if not math.isfinite(step) or step <= 0:
+        raise ValueError(f"step must be positive and finite, got {step!r}")
+    diagonal = float(np.linalg.norm(scene.volume.extent))
+    if diagonal / step > 1e6:
+        raise ValueError(f"step {step!r} is absurdly small for a box {diagonal:.4g} across (over 1e6 segments per ray)")
+    if target not in TARGETS:
+        raise ValueError(f"target must be one of {', '.join(TARGETS)}, got {target!r}")
+    if jitter_seed is not None and (isinstance(jitter_seed, bool) or not isinstance(jitter_seed, (int, np.integer))):
+        raise TypeError(f"jitter_seed must be None or an integer, got {jitter_seed!r}")
+    if isinstance(ert_transmittance, bool) or not isinstance(ert_transmittance, (int, float, np.floating)):
+        raise TypeError(f"ert_transmittance must be a number, got {ert_transmittance!r}")
+    if not 0 <= ert_transmittance < 1:
+        raise ValueError(f"ert_transmittance must be in [0, 1), got {ert_transmittance!r}")
+    if not isinstance(skip_empty, (bool, np.bool_)):
+        raise TypeError(f"skip_empty must be True or False, got {skip_empty!r}")
+
+    composite = scene.mode == "composite"
+    lut = tables.get("lut", scene.tf, LookupTable)
+    jitter = None
+    if jitter_seed is not None:
+        rng = np.random.default_rng(int(jitter_seed))
+        jitter = rng.random((JITTER_TABLE, JITTER_TABLE)).astype(np.float32)
+    occupancy = None
+    if skip_empty and composite:
+        ranges = tables.get("brick_ranges", scene.volume, brick_value_ranges)
+        occupancy = brick_occupancy(ranges, lut)
+    defines = {f"MODE_{scene.mode.upper()}": 1}
+    if scene.camera.is_ortho:
+        defines["ORTHO"] = 1
+    if jitter is not None:
+        defines["JITTER"] = 1
+    if occupancy is not None:
+        defines["SKIP_EMPTY"] = 1
+    ert = float(ert_transmittance) if composite else 0.0
+    if ert > 0:
+        defines["EARLY_RAY_TERMINATION"] = 1
+    if scene.volume.has_nonfinite:
+        defines["MASK_NONFINITE"] = 1
+    return RaycastPlan(scene=scene, step=step, lut=lut, target=target, jitter=jitter,
+                       ert_transmittance=ert, occupancy=occupancy, defines=defines)
+
+
+def _block_reduce(a, axis, reduce):
+    """Reduce ``a`` over blocks of BRICK samples along ``axis``, each block including the
+    next block's first sample (the cells of a brick touch BRICK + 1 samples)."""
+    n = a.shape[axis]
+    nb = max(1, math.ceil((n - 1) / BRICK))
+    idx = np.minimum(np.arange(nb * BRICK + 1), n - 1)
+    a = np.take(a, idx, axis=axis)
+    body = np.take(a, np.arange(nb * BRICK), axis=axis)
+    shape = list(body.shape)
+    shape[axis:axis + 1] = [nb, BRICK]
+    r = reduce(body.reshape(shape), axis=axis + 1)
+    edge = np.take(a, np.arange(1, nb + 1) * BRICK, axis=axis)
+    return reduce(np.stack([r, edge]), axis=0)
+
+
+def brick_value_ranges(volume):
+    """Per brick (bz, by, bx): min and max of the samples its cells touch, widened by one
+    sample on every side. Depends only on the volume: computed once per volume."""
+    from scipy.ndimage import maximum_filter, minimum_filter
+    v = volume.values(np.float32)
+    lo, hi = minimum_filter(v, size=3, mode="nearest"), maximum_filter(v, size=3, mode="nearest")
+    for axis in range(3):
+        lo = _block_reduce(lo, axis, np.min)
+        hi = _block_reduce(hi, axis, np.max)
+    return lo.astype(np.float64), hi.astype(np.float64)
+
+
+def brick_occupancy(ranges, lut):
+    """True for bricks in which some value has non-zero opacity. The range is widened by
+    one table entry so the shader's float32 lookup cannot reach an entry left out here."""
+    lo, hi = ranges
+    pad = 1.0 / lut.scale
+    return lut.max_opacity_between(lo - pad, hi + pad) > 0
+
+
+# ---------------------------------------------------------------------------------------
+# GL path
+
+def _unit_cube_back_face_mesh():
+    """36 vertices of the unit cube, every triangle wound counter-clockwise seen from
+    outside (so culling front faces leaves the back faces)."""
+    corners = np.array([[x, y, z] for z in (0, 1) for y in (0, 1) for x in (0, 1)], np.float64)
+    faces = [(0, 2, 6, 4), (1, 5, 7, 3), (0, 4, 5, 1), (2, 3, 7, 6), (0, 1, 3, 2), (4, 6, 7, 5)]
+    tris = []
+    centre = np.full(3, 0.5)
+    for a, b, c, d in faces:
+        for tri in ((a, b, c), (a, c, d)):
+            p = corners[list(tri)]
+            normal = np.cross(p[1] - p[0], p[2] - p[0])
+            if np.dot(normal, p.mean(axis=0) - centre) < 0:
+                p = p[::-1]
+            tris.append(p)
+    return np.array(tris, np.float32).reshape(-1, 3)
+
+
+_FULLSCREEN = np.array([[-1, -1, 0], [3, -1, 0], [-1, 3, 0]], np.float32)
+
+
+def _proxy(plan):
+    """('box', view_proj) or ('fullscreen', identity) for this camera."""
+    import pyrr
+    scene = plan.scene
+    cam = scene.camera
+    lo, _ = scene.volume.bounds
+    extent = scene.volume.extent
+    eye = cam.eye - lo
+    corners = np.array([[x, y, z] for z in (0, 1) for y in (0, 1) for x in (0, 1)]) * extent
+    depth = (corners - eye) @ cam.forward
+    margin = 1e-3 * float(np.linalg.norm(extent))
+    aspect = scene.width / scene.height
+    if cam.is_ortho:
+        near, far = float(depth.min()) - margin, float(depth.max()) + margin
+        hx, hy = cam.screen_scale(scene.width, scene.height)
+        proj = pyrr.matrix44.create_orthogonal_projection(-hx, hx, -hy, hy, near, far, dtype=np.float64)
+    else:
+        gap = np.maximum(np.maximum(-eye, eye - extent), 0.0)
+        distance = float(np.linalg.norm(gap))
+        if distance < margin:
+            return "fullscreen", np.eye(4)
+        # Every exit point is at least `distance` from the eye and within the view's
+        # diagonal half-angle of the axis, so this near plane never clips a back face.
+        hx, hy = cam.screen_scale(scene.width, scene.height)
+        cos_half_diag = 1.0 / math.sqrt(1.0 + hx * hx + hy * hy)
+        near = 0.5 * distance * cos_half_diag
+        far = float(depth.max()) * 1.01 + margin
+        proj = pyrr.matrix44.create_perspective_projection(cam.fov, aspect, near, far, dtype=np.float64)
+    view = pyrr.matrix44.create_look_at(eye, eye + cam.forward, cam.true_up, dtype=np.float64)
+    model = pyrr.matrix44.create_from_scale(extent, dtype=np.float64)
+    return "box", model @ view @ proj
+
+
+def draw(renderer, plan):
+    """Render the plan; returns (H, W, 4) float32 premultiplied RGBA, row 0 on top."""
+    ctx = renderer.ctx
+    scene = plan.scene
+    volume = scene.volume
+    prog = renderer.programs.get("raycast/raycast.vert", "raycast/raycast.frag", plan.defines)
+
+    units = {"t_volume": renderer.volume_texture(volume), "t_tf": renderer.tf_texture(plan.lut)}
+    if plan.jitter is not None:
+        units["t_jitter"] = renderer.small_texture("jitter", plan.jitter)
+    if plan.occupancy is not None:
+        units["t_occupancy"] = renderer.occupancy_texture(volume, scene.tf, plan.occupancy)
+    if volume.has_nonfinite:
+        units["t_cell_valid"] = renderer.cell_valid_texture(volume)
+    for unit, (name, tex) in enumerate(units.items()):
+        tex.use(location=unit)
+        if name in prog:
+            prog[name].value = unit
+
+    cam = scene.camera
+    lo, _ = volume.bounds
+    sx, sy = cam.screen_scale(scene.width, scene.height)
+    uniforms = {
+        "u_viewport": (scene.width, scene.height),
+        "u_eye": tuple(cam.eye - lo), "u_right": tuple(cam.right), "u_up": tuple(cam.true_up),
+        "u_forward": tuple(cam.forward), "u_screen": (sx, sy),
+        "u_extent": tuple(volume.extent), "u_step": plan.step,
+        "u_inv_unit": 1.0 / scene.tf.unit_distance, "u_max_segments": plan.max_segments,
+        "u_dims": tuple(float(n) for n in volume.dims), "u_spacing": tuple(volume.spacing),
+        "u_tf_lo": plan.lut.lo, "u_tf_scale": plan.lut.scale, "u_tf_size": plan.lut.size,
+    }
+    if plan.occupancy is not None:
+        uniforms["u_brick"] = float(BRICK)
+    if plan.ert_transmittance > 0:
+        uniforms["u_ert_transmittance"] = plan.ert_transmittance
+    if scene.mode == "isosurface":
+        uniforms["u_iso"] = scene.iso_value
+        uniforms["u_phong"] = scene.phong
+        uniforms["u_gradient_epsilon"] = gradient_epsilon(volume)
+    for name, value in uniforms.items():
+        if name in prog:  # the compiler drops uniforms a variant does not use
+            prog[name].value = value
+
+    kind, view_proj = _proxy(plan)
+    prog["u_view_proj"].write(view_proj.astype("f4").tobytes())
+    vao = renderer.proxy_vao(prog, kind)
+    fbo = renderer.target(scene.width, scene.height, TARGETS[plan.target])
+    fbo.use()
+    fbo.clear(0.0, 0.0, 0.0, 0.0)
+    ctx.disable(ctx.BLEND | ctx.DEPTH_TEST)
+    if kind == "box":
+        ctx.enable(ctx.CULL_FACE)
+        ctx.cull_face = "front"
+    else:
+        ctx.disable(ctx.CULL_FACE)
+    vao.render()
+    ctx.disable(ctx.CULL_FACE)
+    return renderer.read_target(fbo, scene.width, scene.height)
+
+
+PROXY_MESHES = {"box": _unit_cube_back_face_mesh, "fullscreen": lambda: _FULLSCREEN}

@@ -1,0 +1,21 @@
+// Transfer-function lookup (NumPy twin: transfer.LookupTable.lookup).
+#ifndef DVR_CLASSIFICATION_GLSL
+#define DVR_CLASSIFICATION_GLSL
+
+uniform sampler2D t_tf;     // (n, 1) RGBA32F: colour and unit-distance opacity
+uniform float u_tf_lo;      // data value of entry 0
+uniform float u_tf_scale;   // entries per data unit
+uniform int u_tf_size;
+
+// Linear interpolation between table entries done here, in full float precision,
+// rather than by the texture unit's filter.
+vec4 applyTF(float s) {
+    float u = clamp((s - u_tf_lo) * u_tf_scale, 0.0, float(u_tf_size - 1));
+    int i0 = min(int(floor(u)), u_tf_size - 2);
+    float f = u - float(i0);
+    vec4 a = texelFetch(t_tf, ivec2(i0, 0), 0);
+    vec4 b = texelFetch(t_tf, ivec2(i0 + 1, 0), 0);
+    return a * (1.0 - f) + b * f;
+}
+
+#endif

@@ -1,0 +1,195 @@
+// Single-pass ray casting: one ray per pixel centre, ray-box entry and exit, midpoint
+// samples on segments `u_step` long with the last (shorter) segment at its true length.
+#version 330 core
+
+// Feature switches, off by default; the renderer defines exactly those a scene uses.
+#ifndef MODE_COMPOSITE
+#define MODE_COMPOSITE 0
+#endif
+#ifndef MODE_MIP
+#define MODE_MIP 0
+#endif
+#ifndef MODE_MINIP
+#define MODE_MINIP 0
+#endif
+#ifndef MODE_AVERAGE
+#define MODE_AVERAGE 0
+#endif
+#ifndef MODE_ISOSURFACE
+#define MODE_ISOSURFACE 0
+#endif
+#ifndef ORTHO
+#define ORTHO 0
+#endif
+#ifndef JITTER
+#define JITTER 0
+#endif
+#ifndef SKIP_EMPTY
+#define SKIP_EMPTY 0
+#endif
+#ifndef EARLY_RAY_TERMINATION
+#define EARLY_RAY_TERMINATION 0
+#endif
+#ifndef MASK_NONFINITE
+#define MASK_NONFINITE 0
+#endif
+
+#include "common/ray_box.glsl"
+#include "common/sampling.glsl"
+#include "common/classification.glsl"
+#include "common/compositing.glsl"
+#if MODE_ISOSURFACE
+#include "common/shading.glsl"
+#include "common/isosurface.glsl"
+#endif
+
+uniform vec2 u_viewport;      // image width, height in pixels
+uniform vec3 u_eye;           // eye, relative to the box's lower corner
+uniform vec3 u_right;         // camera basis (world)
+uniform vec3 u_up;
+uniform vec3 u_forward;
+uniform vec2 u_screen;        // half extent of the view: at unit distance, or world (ortho)
+uniform vec3 u_extent;        // box size; the box is [0, u_extent]
+uniform float u_step;         // segment length, world units
+uniform float u_inv_unit;     // 1 / transfer-function unit distance
+uniform int u_max_segments;   // upper bound on segments per ray (a safety net)
+#if JITTER
+uniform sampler2D t_jitter;   // offsets in [0, 1) of a step, tiled over the image
+#endif
+#if SKIP_EMPTY
+uniform sampler3D t_occupancy; // per brick: 1 if any value in it has non-zero opacity
+uniform float u_brick;         // brick size in samples
+#endif
+#if EARLY_RAY_TERMINATION
+uniform float u_ert_transmittance;
+#endif
+#if MODE_ISOSURFACE
+uniform float u_iso;
+#endif
+
+out vec4 f_color;
+
+void main() {
+    vec2 ndc = gl_FragCoord.xy * (2.0 / u_viewport) - 1.0;
+    vec3 offset = (ndc.x * u_screen.x) * u_right + (ndc.y * u_screen.y) * u_up;
+#if ORTHO
+    vec3 origin = u_eye + offset;
+    vec3 dir = u_forward;
+#else
+    vec3 origin = u_eye;
+    vec3 dir = normalize(u_forward + offset);
+#endif
+    vec2 range = intersectBox(origin, dir, vec3(0.0), u_extent);
+    f_color = vec4(0.0);
+    if (range.y <= range.x) return;
+    float t0 = range.x, t1 = range.y;
+
+#if JITTER
+    ivec2 jsize = textureSize(t_jitter, 0);
+    float jitter = texelFetch(t_jitter, ivec2(gl_FragCoord.xy) % jsize, 0).r;
+#else
+    float jitter = 0.0;
+#endif
+
+#if MODE_COMPOSITE
+    vec3 color = vec3(0.0);
+    float transmittance = 1.0;
+#elif MODE_MIP
+    float s_best = -1.0 / 0.0;
+#elif MODE_MINIP
+    float s_best = 1.0 / 0.0;
+#elif MODE_AVERAGE
+    float s_sum = 0.0;
+    float len_sum = 0.0;
+#elif MODE_ISOSURFACE
+    float t_prev = t0;
+    bool have_prev = false;
+    bool above_prev = false;
+    float t_hit = -1.0;
+#endif
+
+    // Segment k spans [t0 + (jitter + k) * step, t0 + (jitter + k + 1) * step] clipped to
+    // [t0, t1]; k = -1 is the partial segment in front of a jittered start. Positions come
+    // from k, never from accumulation, so skipping segments cannot move a sample.
+    for (int k = -1; k < u_max_segments; ++k) {
+        float a = max(t0 + (jitter + float(k)) * u_step, t0);
+        if (a >= t1) break;
+        float b = min(t0 + (jitter + float(k + 1)) * u_step, t1);
+        float len = b - a;
+        if (len <= 0.0) continue;
+        float tm = 0.5 * (a + b);
+        vec3 p = origin + tm * dir;
+#if MASK_NONFINITE
+        if (!insideValidCell(p)) continue;
+#endif
+#if SKIP_EMPTY
+        {
+            vec3 idx = p / u_spacing;
+            ivec3 brick = clamp(ivec3(floor(idx / u_brick)), ivec3(0), textureSize(t_occupancy, 0) - 1);
+            if (texelFetch(t_occupancy, brick, 0).r < 0.5) {
+                // Leave the brick: every midpoint inside it has zero opacity. Jump to the
+                // segment before the one whose midpoint first passes the brick's exit, so
+                // rounding can only make us look once more, never skip a sample.
+                vec3 lo = vec3(brick) * u_brick * u_spacing;
+                vec3 hi = lo + u_brick * u_spacing;
+                vec3 t_far = max((lo - origin) / dir, (hi - origin) / dir);
+                float t_exit = min(min(t_far.x, t_far.y), t_far.z);
+                int k_next = int(ceil((t_exit - t0) / u_step - jitter - 0.5)) - 1;
+                k = max(k, k_next - 1);
+                continue;
+            }
+        }
+#endif
+        float s = sampleVolume(p);
+#if MODE_COMPOSITE
+        vec4 rgba = applyTF(s);
+        float alpha = correctOpacity(rgba.a, len * u_inv_unit);
+        compositeFrontToBack(color, transmittance, rgba.rgb, alpha);
+  #if EARLY_RAY_TERMINATION
+        if (transmittance < u_ert_transmittance) break;
+  #endif
+        if (transmittance <= 0.0) break;
+#elif MODE_MIP
+        s_best = max(s_best, s);
+#elif MODE_MINIP
+        s_best = min(s_best, s);
+#elif MODE_AVERAGE
+        s_sum += s * len;
+        len_sum += len;
+#elif MODE_ISOSURFACE
+        if (!have_prev) {
+            // The status at the first point inside the domain is the reference.
+            float s_entry = sampleVolume(origin + a * dir);
+            above_prev = s_entry >= u_iso;
+            t_prev = a;
+            have_prev = true;
+        }
+        bool above = s >= u_iso;
+        if (above != above_prev) {
+            t_hit = refineIsoBisection(origin, dir, t_prev, tm, u_iso);
+            break;
+        }
+        t_prev = tm;
+#endif
+    }
+
+#if MODE_COMPOSITE
+    f_color = vec4(color, 1.0 - transmittance);
+#elif MODE_MIP || MODE_MINIP
+    if (!isinf(s_best)) {
+        vec4 rgba = applyTF(s_best);
+        f_color = vec4(rgba.rgb * rgba.a, rgba.a);
+    }
+#elif MODE_AVERAGE
+    if (len_sum > 0.0) {
+        vec4 rgba = applyTF(s_sum / len_sum);
+        f_color = vec4(rgba.rgb * rgba.a, rgba.a);
+    }
+#elif MODE_ISOSURFACE
+    if (t_hit >= 0.0) {
+        vec3 p_hit = origin + t_hit * dir;
+        vec3 rgb = applyTF(u_iso).rgb;
+        f_color = vec4(shadeBlinnPhong(rgb, gradient(p_hit), dir), 1.0);
+    }
+#endif
+}
