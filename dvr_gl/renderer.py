@@ -37,6 +37,10 @@ class Renderer:
         self._vaos = {}
         self.tables = TableCache()
         self._released = False
+        # moderngl re-binds the last bound framebuffer when it makes a new one: bind this
+        # 1x1 one before releasing any other, so the one it remembers is never deleted.
+        with self.ctx:
+            self._idle_fbo = self.ctx.framebuffer([self.ctx.texture((1, 1), 4, dtype="f1")])
 
     # -- lifetime ---------------------------------------------------------------------
     def __enter__(self):
@@ -119,7 +123,7 @@ class Renderer:
         def make():
             tex = self.ctx.texture((width, height), 4, dtype=dtype)
             self.created.append(("target", (height, width, dtype)))
-            return _Target(self.ctx.framebuffer([tex]), tex)
+            return _Target(self.ctx.framebuffer([tex]), tex, self._idle_fbo)
         return self._targets.get((width, height, dtype), make).fbo
 
     def read_target(self, fbo, width, height):
@@ -140,10 +144,12 @@ class Renderer:
 
 
 class _Target:
-    def __init__(self, fbo, tex):
+    def __init__(self, fbo, tex, idle):
         self.fbo = fbo
         self.tex = tex
+        self.idle = idle
 
     def release(self):
+        self.idle.use()
         self.fbo.release()
         self.tex.release()

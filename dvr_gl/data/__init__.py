@@ -36,20 +36,24 @@ SYNTHETIC_EXTENT = 63.0
 
 # The synthetic field's parts, in world units (box [0, 63]^3, centre 31.5).
 _CENTRE = np.array([31.5, 31.5, 31.5])
-_TORUS_RADIUS = 18.0            # major radius
-_TORUS_SIGMA = 2.5              # Gaussian width of the tube
+_TORUS_RADIUS = 20.0            # major radius
+_TORUS_SIGMA = 3.0              # Gaussian width of the tube
 _TORUS_TILT = math.radians(35)  # its axis: +z turned towards +y about +x
 _TORUS_AXIS = np.array([0.0, math.sin(_TORUS_TILT), math.cos(_TORUS_TILT)])
 _BLOBS = (  # (centre offset from the box centre, sigma, peak)
-    (np.array([0.0, 0.0, 0.0]), 5.0, 0.6),
-    (np.array([10.0, 12.0, 14.0]), 3.5, 0.35),
+    (np.array([0.0, 0.0, 0.0]), 6.0, 0.6),
+    (np.array([-15.0, 13.0, 13.0]), 4.0, 0.35),
 )
 
 
 @functools.lru_cache(maxsize=1)
 def ct_head() -> Volume:
     """The VTK "headsq" CT head, quarter resolution: data (93, 64, 64) int16 (z, y, x),
-    spacing (3.2, 3.2, 1.5), origin (0, 0, 0), values 0..3926."""
+    spacing (3.2, 3.2, 1.5), origin (0, 0, 0), values 0..3926.
+
+    The face looks towards +y and the top of the head is at z = 0, so
+    ``default_camera(ct_head(), elevation=90)`` shows the face upright.
+    """
     with importlib.resources.files(__name__).joinpath(_HEADSQ_FILE).open("rb") as f:
         with np.load(f, allow_pickle=False) as npz:
             data = npz["data"].astype(np.int16)  # native byte order
@@ -59,32 +63,36 @@ def ct_head() -> Volume:
 
 
 def ct_head_tf() -> TransferFunction:
-    """Skin faint and warm, bone opaque and ivory, air and everything below 500 clear.
+    """A translucent skull behind a faint skin: air and soft tissue clear, the skin's
+    boundary (500-950) a thin brown veil, bone (above 1150) from tan to ivory.
 
     Data units (CT values of this data set: air ~0-200, soft tissue ~900-1100, bone
     ~1200-2600); unit distance 1.5, the head's smallest spacing (one voxel along z).
+    Unshaded, so bone stays translucent: opaque bone would render as a flat silhouette.
     """
     return TransferFunction(
         color=[(500.0, 0.55, 0.25, 0.15),
                (1000.0, 0.88, 0.60, 0.48),
-               (1250.0, 1.00, 0.93, 0.82),
+               (1150.0, 0.70, 0.45, 0.30),
+               (1500.0, 0.95, 0.85, 0.70),
                (2500.0, 1.00, 1.00, 0.96)],
-        opacity=[(500.0, 0.0),
-                 (900.0, 0.012),
-                 (1150.0, 0.02),
-                 (1400.0, 0.35),
-                 (2500.0, 0.8)],
+        opacity=[(400.0, 0.0),
+                 (700.0, 0.05),
+                 (950.0, 0.0),
+                 (1150.0, 0.0),
+                 (1500.0, 0.04),
+                 (2500.0, 0.25)],
         unit_distance=1.5)
 
 
 def synthetic_field(x, y, z):
     """The synthetic scalar field at world points (arrays broadcast), float64.
 
-    A Gaussian tube (sigma 3) around a circle of radius 15 centred in the box, its axis
-    tilted 35 degrees from +z towards +y, peak 1.0; a Gaussian blob (sigma 5, peak 0.6) at
-    the box centre; one (sigma 3.5, peak 0.35) at centre + (8, 10, 12), above the torus
-    plane. The parts barely overlap (the field's maximum is about 1.007) and the field is
-    below 1e-6 on the faces of the box [0, 63]^3.
+    A Gaussian tube (sigma 3) around a circle of radius 20 centred in the box, its axis
+    tilted 35 degrees from +z towards +y, peak 1.0; a Gaussian blob (sigma 6, peak 0.6) at
+    the box centre; one (sigma 4, peak 0.35) at centre + (-15, 13, 13), above the torus
+    plane. The parts barely overlap (the field's maximum is about 1.002) and the field is
+    below 1e-3 on the faces of the box [0, 63]^3.
     """
     p = np.stack(np.broadcast_arrays(np.asarray(x, np.float64), np.asarray(y, np.float64),
                                      np.asarray(z, np.float64)), axis=-1) - _CENTRE
@@ -117,15 +125,14 @@ def _synthetic(n):
 
 
 def synthetic_tf() -> TransferFunction:
-    """Blue-cyan small blob (0.35), amber centre blob (0.6), red torus (1.0); values
-    below 0.1 clear. Unit distance 1.0 (one voxel at n = 64)."""
+    """Bands of opacity at the three peaks: the small blob (0.35) cyan, the centre blob
+    (0.6) amber, the torus core (1.0) red, with faint shells between; values below 0.1
+    clear. Unit distance 1.0 (one voxel at n = 64)."""
     return TransferFunction(
         color=[(0.10, 0.15, 0.25, 0.90),
                (0.35, 0.15, 0.80, 0.95),
                (0.60, 0.98, 0.75, 0.15),
                (1.00, 0.90, 0.15, 0.10)],
-        opacity=[(0.10, 0.0),
-                 (0.30, 0.10),
-                 (0.60, 0.25),
-                 (1.00, 0.60)],
+        opacity=[(0.10, 0.0), (0.25, 0.02), (0.34, 0.30), (0.42, 0.02),
+                 (0.55, 0.05), (0.60, 0.30), (0.68, 0.05), (0.90, 0.20), (1.00, 0.80)],
         unit_distance=1.0)

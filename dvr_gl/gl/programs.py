@@ -64,6 +64,21 @@ def resolve_includes(name: str, root: Path | None = None, _stack=None, _seen=Non
     return "\n".join(out)
 
 
+def resolve_text(text: str, root: Path | None = None) -> str:
+    """Like :func:`resolve_includes` for shader text that is not in a file (the shader
+    unit-test harness builds its programs this way)."""
+    root = root or shader_root()
+    out, seen = [], set()
+    for lineno, line in enumerate(text.splitlines(), start=1):
+        m = _INCLUDE.match(line)
+        if m is None:
+            out.append(line)
+        elif m.group(1) not in seen:
+            out.append(resolve_includes(m.group(1), root, ["<text>"], seen))
+            out.append(f"#line {lineno + 1}")
+    return "\n".join(out)
+
+
 def declared_switches(source: str) -> set:
     return set(_DECLARED.findall(source))
 
