@@ -102,7 +102,7 @@ class Renderer:
 
     def tf_texture(self, lut):
         def make():
-            tex = self.ctx.texture((lut.size, 1), 4, lut.table.tobytes(), dtype="f4")
+            tex = self.ctx.texture((lut.size, 2), 4, lut.texture_rows().tobytes(), dtype="f4")
             tex.filter = (self.ctx.NEAREST, self.ctx.NEAREST)
             self.created.append(("tf", lut.table.shape))
             return tex

@@ -23,7 +23,11 @@ LUT_SIZE = 4096
 
 class LookupTable:
     """RGBA (colour, opacity) samples of a transfer function, float32, with the mapping
-    from data values to table index: ``u = (s - lo) * scale``, clamped to [0, n-1]."""
+    from data values to table index: ``u = (s - lo) * scale``, clamped to [0, n-1].
+
+    ``transparency`` holds ``1 - alpha`` per entry, computed in float64 before rounding:
+    near alpha = 1 it keeps the relative precision that a float32 alpha has lost, and
+    interpolating it linearly is the same as interpolating alpha."""
 
     def __init__(self, tf: TransferFunction, size: int = LUT_SIZE):
         knots = tf.knots
@@ -39,6 +43,7 @@ class LookupTable:
         self.size = size
         self.scale = (size - 1) / (hi - lo)
         self.table = table.astype(np.float32)
+        self.transparency = (1.0 - table[:, 3]).astype(np.float32)
 
     def lookup(self, s):
         """RGBA at data values ``s`` (float64 arithmetic on the float32 table)."""
@@ -47,6 +52,21 @@ class LookupTable:
         f = (u - i0)[..., None]
         t = self.table.astype(np.float64)
         return t[i0] * (1 - f) + t[i0 + 1] * f
+
+    def lookup_transparency(self, s):
+        """1 - alpha at data values ``s``, from the transparency row."""
+        u = np.clip((np.asarray(s, dtype=np.float64) - self.lo) * self.scale, 0.0, self.size - 1)
+        i0 = np.minimum(np.floor(u).astype(np.int64), self.size - 2)
+        f = u - i0
+        t = self.transparency.astype(np.float64)
+        return t[i0] * (1 - f) + t[i0 + 1] * f
+
+    def texture_rows(self):
+        """(2, n, 4) float32: row 0 RGBA, row 1 transparency in its first channel."""
+        rows = np.zeros((2, self.size, 4), np.float32)
+        rows[0] = self.table
+        rows[1, :, 0] = self.transparency
+        return rows
 
     def max_opacity_between(self, smin, smax):
         """Largest LUT opacity over each value interval [smin, smax] (arrays): the

@@ -9,45 +9,54 @@ not import it; the first render does.
 How the scene is matched
 ------------------------
 - Volume: a ``vtkImageData`` with the volume's dimensions, spacing and origin and its
-  samples in their own dtype (float64 is given to VTK as float32), trilinear
-  interpolation. VTK's volume domain is the same box, first to last sample, and its
-  texture coordinates put samples on texel centres, as here.
-- Classification: ``vtkColorTransferFunction`` and ``vtkPiecewiseFunction`` with the
-  transfer function's control points in data units (both clamp outside their ends, as
-  here); ``ScalarOpacityUnitDistance`` = ``tf.unit_distance``. VTK corrects opacity per
-  sample with ``1 - (1 - alpha)^(step / unit_distance)``, the same rule as the contract.
-  VTK classifies through its own lookup tables (built over the data's range).
+  samples in their own dtype (float64 is given to VTK as float32; ``data_as_float=True``
+  gives every dtype as float32), trilinear interpolation. VTK's domain is the same box,
+  first to last sample, and its texture coordinates put samples on texel centres
+  (checked: a MIP of a linear ramp matches the ramp to the lookup table's precision).
+- Classification: ``vtkColorTransferFunction`` (RGB space) and ``vtkPiecewiseFunction``
+  with the transfer function's control points in data units, both clamped outside their
+  ends, as here; ``ScalarOpacityUnitDistance`` = ``tf.unit_distance``. VTK corrects
+  opacity per sample with ``1 - (1 - alpha)^(step / unit_distance)``, the contract's
+  rule, and classifies through its own lookup tables built over the data's range.
 - Sampling: ``AutoAdjustSampleDistances`` off, ``SampleDistance`` = ``step`` (world
   units), ``ImageSampleDistance`` = 1, no jittering, shading off.
 - Camera: the same eye, target and up; vertical view angle = ``fov``, or parallel
-  projection with parallel scale = ``ortho_height / 2``; the clipping range is reset to
-  the volume's bounds so nothing in the box is clipped (VTK starts rays at its near
-  plane, which for an eye outside the box lies in front of the box).
-- Modes: composite, mip, minip and average map to VTK's blend modes of those names;
-  ``isosurface`` uses VTK's iso-surface blend mode with shading on, the scene's
-  (ka, kd, ks, shininess), VTK's automatic headlight and an opacity of 1. VTK's shading
-  (its gradient estimate and its specular term) is VTK's own, so isosurface images are a
-  looser match than the unshaded modes.
+  projection with parallel scale = ``ortho_height / 2``; the clipping range is reset
+  to the volume's bounds (plus a small margin) so nothing in the box is clipped. VTK
+  starts rays at its near plane, so an eye inside the box is not matched exactly.
+- Modes: composite, mip and minip are VTK's blend modes of those names. ``average``:
+  VTK's average blend writes grey ``(m, m, m, 1)``, with ``m`` the opacity-weighted mean
+  of the scalar normalised to the array's range; the peer sets the opacity function to
+  1, so ``m`` is the plain mean, and classifies it with the scene's transfer function
+  (on the CPU, inside the timed frame). ``isosurface``: VTK's iso-surface blend mode
+  with shading on, the scene's (ka, kd, ks, shininess), VTK's automatic headlight and
+  opacity 1; VTK's gradient estimate and lighting are its own (a surface facing the
+  camera gets ``c * (ka + kd) + ks``, as in the contract), and VTK takes the first
+  sample past the crossing, so isosurface images are a looser match.
 
-Read-back (premultiplication, precision)
-----------------------------------------
+Read-back: premultiplied float RGBA
+-----------------------------------
 VTK's window framebuffer is 8-bit. To avoid quantising to 1/255 the renderer draws
 through a ``vtkFramebufferPass`` whose colour target is RGBA32F and reads that texture
-back as float. (The pass needs a 32-bit fixed-point depth texture: with its default
-float depth texture the GPU ray caster draws nothing.) For the composite mode VTK's
-output is premultiplied RGBA over transparent black already: a constant box of colour
-c gives rgb = c * A exactly. For MIP, MinIP and average VTK writes the classified
-colour straight (rgb = c, alpha = a) and the volume is blended with
-(ONE, ONE_MINUS_SRC_ALPHA), so over transparent black the target holds (c, a); those
-modes are premultiplied here (rgb *= a). See ``_PREMULTIPLY``: each was checked by the
-constant-box tests in ``tests/test_vtk_peer.py``.
+back as float. (The pass must be given a 32-bit fixed-point depth texture: with its
+default float depth texture the GPU ray caster draws nothing.) VTK's output is
+premultiplied RGBA over transparent black in every mode used here: composite and
+isosurface accumulate ``(1 - A) * a * c`` front to back, MIP and MinIP write
+``(c * a, a)``, and the volume is blended with (ONE, ONE_MINUS_SRC_ALPHA). A constant box
+of colour c gives ``rgb = c * A`` to float precision (``tests/test_vtk_peer.py``).
 
 Known differences from the exact image
 --------------------------------------
-VTK takes whole steps only: a ray of length L inside the box gets ``floor``-like
-``L / step`` samples, so up to one step's worth of absorption is lost or gained at the
-back face. For a constant box this shows as an alpha error of at most about
-``(1 - A) * (1 - (1 - a)^(step / u))``.
+- Whole steps only: VTK's first sample is one step past the entry and it takes a whole
+  number of steps, so a ray of length L absorbs over a length that differs from L by
+  up to one step either way (about half a step short on average). For a constant box of
+  opacity a per unit distance u this bounds the alpha error by
+  ``(1 - A) * ((1 - a)^(-step / u) - 1)``; measured errors reach that bound.
+- Texture filtering: VTK uploads integer data in its own type; on Mesa llvmpipe the
+  trilinear weights for 8-bit textures have 8-bit precision, so a uint8 ramp is
+  interpolated with errors of about 1/255 of the range (float and 16-bit data: ~5e-4,
+  the lookup table). ``data_as_float=True`` removes the 8-bit part.
+- Early ray termination when the accumulated alpha exceeds 1 - 1/255.
 
 Headless rendering
 ------------------
@@ -69,12 +78,46 @@ __all__ = ["VTKPeer", "render_vtk", "renderer_string", "available", "SUPPORTED_M
 
 SUPPORTED_MODES = ("composite", "mip", "minip", "average", "isosurface")
 
-# Whether VTK's colour output for a mode is straight (True: multiply rgb by alpha here)
-# or premultiplied already (False). Established with constant boxes; see module docs.
-_PREMULTIPLY = {"composite": False, "mip": False, "minip": False, "average": False,
-                "isosurface": False}
-
 _vtk = None
+
+
+class _KeepCurrentContext:
+    """Puts back the EGL context that was current before VTK made its own current, so
+    that a moderngl context used in the same thread (the dvr_gl Renderer, test fixtures)
+    is never left pointing at VTK's. A no-op where libEGL cannot be loaded."""
+
+    _EGL_DRAW, _EGL_READ = 0x3059, 0x305A
+
+    def __init__(self):
+        self._egl = None
+        try:
+            import ctypes
+            egl = ctypes.CDLL("libEGL.so.1")
+            for name in ("eglGetCurrentContext", "eglGetCurrentDisplay"):
+                getattr(egl, name).restype = ctypes.c_void_p
+                getattr(egl, name).argtypes = []
+            egl.eglGetCurrentSurface.restype = ctypes.c_void_p
+            egl.eglGetCurrentSurface.argtypes = [ctypes.c_int]
+            egl.eglMakeCurrent.restype = ctypes.c_uint
+            egl.eglMakeCurrent.argtypes = [ctypes.c_void_p] * 4
+            self._egl = egl
+        except (OSError, AttributeError):
+            self._egl = None
+        self._saved = None
+
+    def __enter__(self):
+        egl = self._egl
+        if egl is not None:
+            ctx = egl.eglGetCurrentContext()
+            self._saved = (egl.eglGetCurrentDisplay(), egl.eglGetCurrentSurface(self._EGL_DRAW),
+                           egl.eglGetCurrentSurface(self._EGL_READ), ctx) if ctx else None
+        return self
+
+    def __exit__(self, *exc):
+        if self._saved is not None:
+            self._egl.eglMakeCurrent(*self._saved)
+            self._saved = None
+        return False
 
 
 def _import_vtk():
@@ -123,9 +166,11 @@ class VTKPeer:
     changes, the transfer functions when the transfer function changes, and so on.
     """
 
-    def __init__(self):
+    def __init__(self, data_as_float=False):
         v = _import_vtk()
         self._v = v
+        self.data_as_float = bool(data_as_float)
+        self._keep = _KeepCurrentContext()
         self.window = _new_window(v)
         self.window.SetOffScreenRendering(1)
         self.window.SetMultiSamples(0)
@@ -169,7 +214,7 @@ class VTKPeer:
         img.SetSpacing(*(float(s) for s in volume.spacing))
         img.SetOrigin(*(float(o) for o in volume.origin))
         data = volume.data
-        if data.dtype == np.float64:
+        if data.dtype == np.float64 or (self.data_as_float and data.dtype != np.float32):
             data = data.astype(np.float32)
         if volume.has_nonfinite:
             raise NotImplementedError("the VTK peer does not render volumes with masked non-finite samples")
@@ -290,10 +335,7 @@ class VTKPeer:
         out = out[::-1]
         if self._mode == "average":
             return self._classify_average(out)
-        if _PREMULTIPLY[self._mode]:
-            out = out.copy()
-            out[..., :3] *= out[..., 3:4]
-        return np.ascontiguousarray(out)
+        return np.ascontiguousarray(out)  # premultiplied already (module docs)
 
     def _classify_average(self, raw):
         """VTK's average blend writes (m, m, m, 1) with m the mean of the scalar
@@ -310,8 +352,9 @@ class VTKPeer:
 
     def frame(self):
         """Render one frame and read it back (the read-back waits for the GL to finish)."""
-        self.window.Render()
-        return self._read()
+        with self._keep:
+            self.window.Render()
+            return self._read()
 
     def render(self, scene, step, repeats=5, warmup=1):
         """Render ``scene``; returns (image, median seconds per frame over ``repeats``
@@ -333,17 +376,21 @@ class VTKPeer:
         if self._size is None:
             self.window.SetSize(8, 8)
             self._size = (8, 8)
-        self.actor.SetVisibility(self._volume is not None)
-        self.window.Render()
-        self.actor.SetVisibility(True)
-        for line in self.window.ReportCapabilities().splitlines():
+        with self._keep:
+            self.actor.SetVisibility(self._volume is not None)
+            self.window.Render()
+            self.actor.SetVisibility(True)
+            report = self.window.ReportCapabilities()
+        for line in report.splitlines():
             if "OpenGL renderer string" in line:
                 return line.split(":", 1)[1].strip()
         return "unknown"
 
     def close(self):
-        self.renderer.RemoveAllViewProps()
-        self.window.Finalize()
+        with self._keep:
+            self.renderer.RemoveAllViewProps()
+            self.renderer.ReleaseGraphicsResources(self.window)
+            self.window.Finalize()
 
     def __enter__(self):
         return self
@@ -353,22 +400,22 @@ class VTKPeer:
         return False
 
 
-_shared = None
+_shared = {}
 
 
-def _peer():
-    global _shared
-    if _shared is None:
-        _shared = VTKPeer()
-    return _shared
+def _peer(data_as_float=False):
+    key = bool(data_as_float)
+    if key not in _shared:
+        _shared[key] = VTKPeer(data_as_float=key)
+    return _shared[key]
 
 
-def render_vtk(scene, step, repeats=5, warmup=1):
+def render_vtk(scene, step, repeats=5, warmup=1, data_as_float=False):
     """Render ``scene`` through VTK's GPU ray caster at sample distance ``step`` (world
     units). Returns ``(image, seconds)``: image (H, W, 4) float32 premultiplied RGBA,
     row 0 on top; seconds the median time per frame over ``repeats`` frames after
     ``warmup`` frames. Uses one shared offscreen window per process."""
-    return _peer().render(scene, step, repeats=repeats, warmup=warmup)
+    return _peer(data_as_float).render(scene, step, repeats=repeats, warmup=warmup)
 
 
 def renderer_string():

@@ -89,9 +89,10 @@ def test_correct_opacity_edge_values(ctx):
     lengths = np.array([0.0, 1e-6, 1e-3, 0.25, 0.5, 1.0, 3.0, 100.0, 1e4])
     a, x = [g.ravel() for g in np.meshgrid(alphas, lengths)]
     a32, x32 = a.astype(np.float32), x.astype(np.float32)
-    gl = harness.evaluate(ctx, ["common/compositing.glsl"], "out0 = vec4(correctOpacity(in0.x, in0.y));",
-                          [np.c_[a32, x32, np.zeros((a.size, 2))]])[:, 0]
-    ref = common.correct_opacity(a32.astype(np.float64), x32.astype(np.float64))
+    b32 = (1 - a).astype(np.float32)  # transparency, precise near alpha = 1
+    gl = harness.evaluate(ctx, ["common/compositing.glsl"], "out0 = vec4(correctOpacity(in0.x, in0.z, in0.y));",
+                          [np.c_[a32, x32, b32, np.zeros(a.size)]])[:, 0]
+    ref = common.correct_opacity(a32.astype(np.float64), x32.astype(np.float64), b32.astype(np.float64))
     assert np.all(gl[x == 0] == 0) and np.all(gl[(a == 1) & (x > 0)] == 1)
     # -expm1(x * log1p(-a)): log1p, the product and expm1 each keep relative error within
     # a few u (the tricks cancel the rounding of 1 + x); the product's error is amplified
@@ -115,16 +116,18 @@ def test_composite_front_to_back(ctx):
     alpha = rng.random(200).astype(np.float32)
     alpha[:20], alpha[20:40] = 0.0, 1.0
     acc = rng.random((200, 3)).astype(np.float32) * 0.5
-    trans = rng.random(200).astype(np.float32)
-    trans[40:50] = 0.0
-    body = ("vec3 c = in0.rgb; float t = in0.a; compositeFrontToBack(c, t, in1.rgb, in1.a);"
-            " out0 = vec4(c, t);")
-    gl = harness.evaluate(ctx, ["common/compositing.glsl"], body, [np.c_[acc, trans], np.c_[rgb, alpha]])
-    c, t = common.composite_front_to_back(acc.astype(np.float64), trans.astype(np.float64),
+    acc_alpha = rng.random(200).astype(np.float32)
+    acc_alpha[40:50] = 1.0
+    acc_alpha[50:60] = 0.0
+    body = ("vec3 c = in0.rgb; float a = in0.a; compositeFrontToBack(c, a, in1.rgb, in1.a);"
+            " out0 = vec4(c, a);")
+    gl = harness.evaluate(ctx, ["common/compositing.glsl"], body, [np.c_[acc, acc_alpha], np.c_[rgb, alpha]])
+    c, a = common.composite_front_to_back(acc.astype(np.float64), acc_alpha.astype(np.float64),
                                           rgb.astype(np.float64), alpha.astype(np.float64))
-    np.testing.assert_allclose(gl[:, :3], c, rtol=0, atol=4 * U32)   # values <= 1.5: two roundings
-    np.testing.assert_allclose(gl[:, 3], t, rtol=0, atol=2 * U32)
-    assert np.all(gl[20:40, 3] == 0)  # alpha 1 leaves no transmittance
+    np.testing.assert_allclose(gl[:, :3], c, rtol=0, atol=4 * U32)   # values <= 1.5: a few roundings
+    np.testing.assert_allclose(gl[:, 3], a, rtol=0, atol=4 * U32)
+    assert np.all(gl[20:40, 3] == 1)  # alpha 1 makes the pixel exactly opaque
+    assert np.all(gl[40:50, 3] == 1)  # and an opaque pixel stays opaque
 
 
 # -- classification.glsl ----------------------------------------------------------------
@@ -135,10 +138,11 @@ def test_apply_tf_matches_lookup_table(ctx, renderer):
     lut = LookupTable(tf)
     s = np.concatenate([[-1e6, -100, -50, 0, 10, 10.5, 11, 250.5, 300, 1e6],
                         np.linspace(-120, 320, 500)]).astype(np.float32)
-    gl = harness.evaluate(ctx, ["common/classification.glsl"], "out0 = applyTF(in0.x);",
+    gl = harness.evaluate(ctx, ["common/classification.glsl"], "out0 = vec4(applyTF(in0.x).rgb, transparencyTF(in0.x));",
                           [np.c_[s, np.zeros((s.size, 3))]], textures={"t_tf": _made(renderer, renderer.tf_texture, lut)},
                           uniforms={"u_tf_lo": lut.lo, "u_tf_scale": lut.scale, "u_tf_size": lut.size})
     ref = lut.lookup(s.astype(np.float64))
+    ref[:, 3] = lut.lookup_transparency(s.astype(np.float64))
     # the table index u = (s - lo) * scale has absolute error <= ~2u * |s - lo| * scale
     # (<= 4096 * 2u ~ 5e-4 of one entry); one entry changes a value by at most the TF's
     # steepest slope per entry (here 0.7 between 10 and 11 spread over ~10 entries: 0.07).

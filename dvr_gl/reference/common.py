@@ -68,22 +68,24 @@ def cell_is_valid(volume, idx):
     return volume.cell_valid[c[..., 2], c[..., 1], c[..., 0]]
 
 
-def correct_opacity(alpha, length_over_unit):
+def correct_opacity(alpha, length_over_unit, transparency=None):
     """Opacity of a segment ``length_over_unit`` unit distances long whose unit-distance
-    opacity is ``alpha``: ``1 - (1 - alpha)^(L/u)``, computed as ``-expm1(L/u * log1p(-alpha))``
-    so that small opacities keep their relative precision (GLSL ``correctOpacity``).
+    opacity is ``alpha``: ``1 - (1 - alpha)^(L/u)``, computed as
+    ``-expm1(L/u * log(1 - alpha))`` so small opacities keep their relative precision
+    (GLSL ``correctOpacity``). ``log(1 - alpha)`` is taken from ``alpha`` up to 0.5 and
+    from ``transparency`` (= 1 - alpha, precise near 1) above, when it is given.
     alpha = 1 gives 1 for any positive length; a zero length gives 0."""
     a = np.asarray(alpha, np.float64)
     x = np.asarray(length_over_unit, np.float64)
+    b = 1 - a if transparency is None else np.asarray(transparency, np.float64)
     with np.errstate(divide="ignore", invalid="ignore"):
-        out = -np.expm1(x * np.log1p(-a))
-    out = np.where(x <= 0, 0.0, np.where(a >= 1, 1.0, out))
-    return out
+        log_t = np.where(a <= 0.5, np.log1p(-np.minimum(a, 0.5)), np.log(np.maximum(b, 0)))
+        out = -np.expm1(x * log_t)
+    return np.where(x <= 0, 0.0, np.where((a >= 1) | (b <= 0), 1.0, out))
 
 
-def composite_front_to_back(color_acc, transmittance, rgb, alpha):
+def composite_front_to_back(color_acc, alpha_acc, rgb, alpha):
     """One over-operator step on associated colour (GLSL ``compositeFrontToBack``):
-    returns the new (colour, transmittance)."""
-    color_acc = color_acc + (transmittance * alpha)[..., None] * rgb
-    transmittance = transmittance * (1 - alpha)
-    return color_acc, transmittance
+    returns the new (colour, accumulated opacity)."""
+    weight = (1 - alpha_acc) * alpha
+    return color_acc + weight[..., None] * rgb, alpha_acc + weight

@@ -52,8 +52,12 @@ def render_plan(plan, lut_exact=False):
     if lut_exact:
         def classify(s):
             return np.concatenate([tf.color(s), tf.opacity(s)[..., None]], axis=-1)
+
+        def transparency(s):
+            return 1 - tf.opacity(s)
     else:
         classify = plan.lut.lookup
+        transparency = plan.lut.lookup_transparency
 
     origins, dirs = cam.rays(W, H)
     origins = (origins - lo).reshape(-1, 3)
@@ -77,7 +81,7 @@ def render_plan(plan, lut_exact=False):
     m = len(hit)
     mode = scene.mode
     color = np.zeros((m, 3))
-    trans = np.ones(m)
+    alpha_acc = np.zeros(m)
     s_best = np.full(m, -np.inf if mode == "mip" else np.inf)
     s_sum = np.zeros(m)
     len_sum = np.zeros(m)
@@ -105,11 +109,11 @@ def render_plan(plan, lut_exact=False):
         s = sample(tm, rows)
         if mode == "composite":
             rgba = classify(s)
-            alpha = correct_opacity(rgba[:, 3], length * inv_unit)
-            color[rows], trans[rows] = composite_front_to_back(color[rows], trans[rows], rgba[:, :3], alpha)
-            stop = trans[rows] <= 0
+            alpha = correct_opacity(rgba[:, 3], length * inv_unit, transparency(s))
+            color[rows], alpha_acc[rows] = composite_front_to_back(color[rows], alpha_acc[rows], rgba[:, :3], alpha)
+            stop = alpha_acc[rows] >= 1
             if plan.ert_transmittance > 0:
-                stop |= trans[rows] < plan.ert_transmittance
+                stop |= 1 - alpha_acc[rows] < plan.ert_transmittance
             alive[rows[stop]] = False
         elif mode == "mip":
             s_best[rows] = np.maximum(s_best[rows], s)
@@ -136,7 +140,7 @@ def render_plan(plan, lut_exact=False):
     result = np.zeros((m, 4))
     if mode == "composite":
         result[:, :3] = color
-        result[:, 3] = 1 - trans
+        result[:, 3] = alpha_acc
     elif mode in ("mip", "minip", "average"):
         if mode == "average":
             ok = len_sum > 0

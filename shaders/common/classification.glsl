@@ -2,20 +2,30 @@
 #ifndef DVR_CLASSIFICATION_GLSL
 #define DVR_CLASSIFICATION_GLSL
 
-uniform sampler2D t_tf;     // (n, 1) RGBA32F: colour and unit-distance opacity
+uniform sampler2D t_tf;     // (n, 2) RGBA32F: row 0 colour and unit-distance opacity,
+                            // row 1 transparency 1 - opacity (precise near opacity 1)
 uniform float u_tf_lo;      // data value of entry 0
 uniform float u_tf_scale;   // entries per data unit
 uniform int u_tf_size;
 
 // Linear interpolation between table entries done here, in full float precision,
 // rather than by the texture unit's filter.
-vec4 applyTF(float s) {
+vec4 lookupTFRow(float s, int row) {
     float u = clamp((s - u_tf_lo) * u_tf_scale, 0.0, float(u_tf_size - 1));
     int i0 = min(int(floor(u)), u_tf_size - 2);
     float f = u - float(i0);
-    vec4 a = texelFetch(t_tf, ivec2(i0, 0), 0);
-    vec4 b = texelFetch(t_tf, ivec2(i0 + 1, 0), 0);
+    vec4 a = texelFetch(t_tf, ivec2(i0, row), 0);
+    vec4 b = texelFetch(t_tf, ivec2(i0 + 1, row), 0);
     return a * (1.0 - f) + b * f;
+}
+
+vec4 applyTF(float s) {
+    return lookupTFRow(s, 0);
+}
+
+// 1 - alpha(s) with the relative precision a float32 alpha near 1 lacks.
+float transparencyTF(float s) {
+    return lookupTFRow(s, 1).r;
 }
 
 #endif

@@ -39,18 +39,24 @@ float expm1Accurate(float x) {
     return x * p;
 }
 
-// Opacity of a segment length_over_unit unit distances long: 1 - (1 - alpha)^(L/u).
+// Opacity of a segment length_over_unit unit distances long: 1 - (1 - alpha)^(L/u),
+// as -expm1(L/u * log(1 - alpha)). log(1 - alpha) comes from alpha while alpha <= 0.5
+// and from the transparency 1 - alpha above (each where it is precise).
 // alpha = 1 gives 1 for any positive length; zero length gives 0.
-float correctOpacity(float alpha, float length_over_unit) {
+float correctOpacity(float alpha, float transparency, float length_over_unit) {
     if (length_over_unit <= 0.0) return 0.0;
-    if (alpha >= 1.0) return 1.0;
-    return -expm1Accurate(length_over_unit * log1pAccurate(-alpha));
+    if (alpha >= 1.0 || transparency <= 0.0) return 1.0;
+    float log_transparency = alpha <= 0.5 ? log1pAccurate(-alpha) : log(transparency);
+    return -expm1Accurate(length_over_unit * log_transparency);
 }
 
-// The over operator on associated colour, front to back; transmittance = 1 - alpha_acc.
-void compositeFrontToBack(inout vec3 color, inout float transmittance, vec3 rgb, float alpha) {
-    color += (transmittance * alpha) * rgb;
-    transmittance *= 1.0 - alpha;
+// The over operator on associated colour, front to back. Accumulating opacity (not
+// transmittance) keeps faint pixels' relative precision; with alpha = 1 the sum
+// alpha_acc + (1 - alpha_acc) rounds to exactly 1 for any alpha_acc in [0, 1].
+void compositeFrontToBack(inout vec3 color, inout float alpha_acc, vec3 rgb, float alpha) {
+    float weight = (1.0 - alpha_acc) * alpha;
+    color += weight * rgb;
+    alpha_acc += weight;
 }
 
 #endif

@@ -93,7 +93,7 @@ void main() {
 
 #if MODE_COMPOSITE
     vec3 color = vec3(0.0);
-    float transmittance = 1.0;
+    float alpha_acc = 0.0;
 #elif MODE_MIP
     float s_best = -1.0 / 0.0;
 #elif MODE_MINIP
@@ -143,12 +143,13 @@ void main() {
         float s = sampleVolume(p);
 #if MODE_COMPOSITE
         vec4 rgba = applyTF(s);
-        float alpha = correctOpacity(rgba.a, len * u_inv_unit);
-        compositeFrontToBack(color, transmittance, rgba.rgb, alpha);
+        float transparency = rgba.a > 0.5 ? transparencyTF(s) : 1.0 - rgba.a;
+        float alpha = correctOpacity(rgba.a, transparency, len * u_inv_unit);
+        compositeFrontToBack(color, alpha_acc, rgba.rgb, alpha);
   #if EARLY_RAY_TERMINATION
-        if (transmittance < u_ert_transmittance) break;
+        if (1.0 - alpha_acc < u_ert_transmittance) break;
   #endif
-        if (transmittance <= 0.0) break;
+        if (alpha_acc >= 1.0) break;
 #elif MODE_MIP
         s_best = max(s_best, s);
 #elif MODE_MINIP
@@ -174,7 +175,7 @@ void main() {
     }
 
 #if MODE_COMPOSITE
-    f_color = vec4(color, 1.0 - transmittance);
+    f_color = vec4(color, alpha_acc);
 #elif MODE_MIP || MODE_MINIP
     if (!isinf(s_best)) {
         vec4 rgba = applyTF(s_best);

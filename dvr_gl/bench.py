@@ -1,0 +1,451 @@
+"""``dvr-gl bench``: speed and accuracy of the ray caster, beside VTK, on real CT data.
+
+For each data set (the vtk.js LIDC2 chest CT and the bundled CT head) and each step of
+1, 1/2 and 1/4 voxel (voxel = the smallest spacing), it renders the same scene with
+
+- dvr_gl's ray caster without empty-space skipping,
+- dvr_gl's ray caster with empty-space skipping,
+- VTK's GPU ray caster (``dvr_gl.vtk_peer``; skipped when VTK is not installed),
+
+and reports the median steady-state frame time (after one warm-up frame; every frame
+ends with the image read back, so the GL has finished) and the error against the exact
+image of the contract (``dvr_gl.reference.exact``, cached on disk): RMSE, largest
+absolute error and PSNR over premultiplied RGBA. The ratio columns divide each row by
+VTK's row at the same data set and step: ``t/VTK`` < 1 is faster than VTK,
+``err/VTK`` < 1 is more accurate.
+
+Results go to stdout as a table and, with ``--out``, to ``<out>.csv``, ``<out>.json``
+(rows plus the machine, renderers and settings) and ``<out>.png`` (error against time,
+log-log, one line per renderer through its steps), each written atomically.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import datetime
+import gzip
+import io
+import json
+import math
+import os
+import platform
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from . import metrics
+from .scene import Camera, Scene, TransferFunction, Volume
+
+STEPS_VOXELS = (1.0, 0.5, 0.25)
+DEFAULT_DATA_DIR = "/work/shared/data"
+CHEST_FILE = os.path.join("vtkjs_lidc2_ct", "LIDC2_256x256x133_uint8.raw.gz")
+
+RENDERERS = (  # (label, kind, skip_empty)
+    ("dvr_gl raycast", "dvr_gl", False),
+    ("dvr_gl raycast+skip", "dvr_gl", True),
+    ("VTK GPU raycast", "vtk", None),
+)
+
+
+# -- data sets -------------------------------------------------------------------------
+def oblique_camera(volume, front, up, azimuth=30.0, elevation=20.0, fov=30.0):
+    """A perspective camera on the volume's centre, far enough that the bounding sphere
+    fits: it looks from ``front`` (a unit direction from the centre to the eye) turned
+    by ``azimuth`` degrees about ``up`` and then raised by ``elevation`` towards ``up``."""
+    front = np.asarray(front, float) / np.linalg.norm(front)
+    up = np.asarray(up, float) / np.linalg.norm(up)
+    side = np.cross(up, front)
+    az, el = math.radians(azimuth), math.radians(elevation)
+    horizontal = math.cos(az) * front + math.sin(az) * side
+    offset = math.cos(el) * horizontal + math.sin(el) * up
+    lo, hi = volume.bounds
+    centre = (lo + hi) / 2
+    radius = float(np.linalg.norm(hi - lo)) / 2
+    distance = radius / math.sin(math.radians(fov) / 2)
+    return Camera(centre + offset * distance, centre, up, fov=fov)
+
+
+def chest_ct(path=None) -> Volume:
+    """The vtk.js LIDC2 chest CT: (133, 256, 256) uint8 (windowed to 8 bit), spacing
+    (1.40625, 1.40625, 2.5). ``path`` defaults to ``$DVR_GL_DATA`` (or the shared data
+    folder) joined with ``vtkjs_lidc2_ct/LIDC2_256x256x133_uint8.raw.gz``."""
+    if path is None:
+        path = os.path.join(os.environ.get("DVR_GL_DATA", DEFAULT_DATA_DIR), CHEST_FILE)
+    with gzip.open(path, "rb") as f:
+        raw = f.read()
+    if len(raw) != 133 * 256 * 256:
+        raise ValueError(f"{path}: expected {133 * 256 * 256} bytes of uint8 samples, got {len(raw)}")
+    data = np.frombuffer(raw, np.uint8).reshape(133, 256, 256)
+    return Volume(data, spacing=(1.40625, 1.40625, 2.5))
+
+
+def chest_tf(volume) -> TransferFunction:
+    """Soft tissue a faint flesh-coloured haze, contrast-filled heart and vessels
+    (values ~110-150) red, bone (above ~160) ivory and nearly opaque; air, lung and fat
+    (0-15 after the data set's 8-bit windowing) clear. Unit distance one voxel."""
+    return TransferFunction(
+        color=[(20, 0.75, 0.45, 0.35), (80, 0.85, 0.55, 0.45), (115, 0.85, 0.20, 0.15),
+               (140, 0.90, 0.25, 0.20), (170, 0.95, 0.90, 0.80), (255, 1.00, 1.00, 0.95)],
+        opacity=[(15, 0.0), (30, 0.01), (90, 0.02), (110, 0.03), (125, 0.2), (145, 0.2),
+                 (160, 0.15), (200, 0.6), (255, 0.8)],
+        unit_distance=volume.min_spacing)
+
+
+def _head():
+    from .data import ct_head, ct_head_tf
+    return ct_head(), ct_head_tf()
+
+
+def datasets(names, chest_path=None):
+    """[(name, volume, tf, camera)] for the requested names; both data sets have the
+    face or chest towards +y and the head towards -z, so both get a front view turned
+    30 degrees and raised 20."""
+    out = []
+    for name in names:
+        if name == "chest":
+            volume = chest_ct(chest_path)
+            tf = chest_tf(volume)
+        elif name == "head":
+            volume, tf = _head()
+        else:
+            raise ValueError(f"unknown data set {name!r}; choose from chest, head")
+        camera = oblique_camera(volume, front=(0, 1, 0), up=(0, 0, -1))
+        out.append((name, volume, tf, camera))
+    return out
+
+
+# -- progress ------------------------------------------------------------------------------
+class Progress:
+    """A one-line text progress bar on stderr (one line per update when not a terminal)."""
+
+    def __init__(self, total, stream=None, width=30):
+        self.total = max(1, int(total))
+        self.done = 0
+        self.stream = stream if stream is not None else sys.stderr
+        self.width = width
+        self.start = time.perf_counter()
+        self.tty = hasattr(self.stream, "isatty") and self.stream.isatty()
+
+    def _line(self, label):
+        frac = self.done / self.total
+        filled = int(round(frac * self.width))
+        elapsed = time.perf_counter() - self.start
+        return (f"[{'#' * filled}{'.' * (self.width - filled)}] {self.done}/{self.total} "
+                f"{elapsed:6.1f}s  {label}")
+
+    def begin(self, label):
+        """Show what is being done now (before it is done)."""
+        if self.tty:
+            self.stream.write("\r\033[K" + self._line(label))
+            self.stream.flush()
+
+    def advance(self, label=""):
+        self.done += 1
+        if self.tty:
+            self.stream.write("\r\033[K" + self._line(label))
+        else:
+            self.stream.write(self._line(label) + "\n")
+        self.stream.flush()
+
+    def close(self):
+        if self.tty:
+            self.stream.write("\n")
+            self.stream.flush()
+
+
+# -- measuring -----------------------------------------------------------------------------
+def time_frames(render, repeats, warmup=1):
+    """(last image, [seconds per frame]) over ``repeats`` calls of ``render`` after
+    ``warmup`` untimed calls; ``render`` must return the image read back."""
+    image = None
+    for _ in range(warmup):
+        image = render()
+    times = []
+    for _ in range(max(1, repeats)):
+        t0 = time.perf_counter()
+        image = render()
+        times.append(time.perf_counter() - t0)
+    return image, times
+
+
+def _row(dataset, scene, label, kind, skip, step_vox, step_world, times, err):
+    return {
+        "dataset": dataset, "width": scene.width, "height": scene.height,
+        "renderer": label, "kind": kind, "skip_empty": skip,
+        "step_voxels": step_vox, "step_world": step_world,
+        "ms_median": 1e3 * statistics.median(times), "ms_min": 1e3 * min(times),
+        "ms_max": 1e3 * max(times), "frames_ms": [1e3 * t for t in times],
+        "rmse": err["rmse"], "max_abs": err["max_abs"], "psnr": err["psnr"],
+        "time_vs_vtk": None, "rmse_vs_vtk": None,
+    }
+
+
+def _add_ratios(rows):
+    vtk = {(r["dataset"], r["step_voxels"]): r for r in rows if r["kind"] == "vtk"}
+    for r in rows:
+        ref = vtk.get((r["dataset"], r["step_voxels"]))
+        if ref is not None:
+            r["time_vs_vtk"] = r["ms_median"] / ref["ms_median"] if ref["ms_median"] > 0 else None
+            r["rmse_vs_vtk"] = r["rmse"] / ref["rmse"] if ref["rmse"] > 0 else None
+
+
+def run(args, out=sys.stdout, err=sys.stderr):
+    """Run the benchmark; returns (rows, info)."""
+    import dvr_gl
+    # The function, imported from its module: ``dvr_gl.reference.exact`` the attribute
+    # can be shadowed by the submodule of the same name once that has been imported.
+    from .reference.exact import exact as exact_image
+
+    size = args.size
+    names = [n.strip() for n in args.datasets.split(",") if n.strip()]
+    steps = [float(s) for s in args.steps.split(",") if s.strip()]
+
+    peer = None
+    vtk_note = None
+    if not args.no_vtk:
+        try:
+            from .vtk_peer import VTKPeer
+            peer = VTKPeer(data_as_float=args.vtk_float)
+        except ImportError as e:
+            vtk_note = f"VTK not available ({e}); VTK rows skipped (pip install 'dvr-gl[bench]')"
+            print(f"dvr-gl bench: {vtk_note}", file=err)
+
+    sets = []
+    for name in names:
+        try:
+            sets.extend(datasets([name], chest_path=args.chest))
+        except FileNotFoundError as e:
+            print(f"dvr-gl bench: skipping {name}: {e}", file=err)
+    if not sets:
+        raise SystemExit("dvr-gl bench: no data set could be loaded")
+
+    renderers = [r for r in RENDERERS if r[1] != "vtk" or peer is not None]
+    progress = Progress(len(sets) * (1 + len(steps) * len(renderers)), stream=err)
+    rows = []
+    info = {}
+    try:
+        with dvr_gl.Renderer(backend=args.backend) as gl:
+            with gl.ctx:
+                info["dvr_gl"] = gl.info()
+            if peer is not None:
+                info["vtk"] = {"renderer": peer.renderer_string(), "version": _vtk_version(),
+                               "data_as_float": bool(args.vtk_float)}
+            for name, volume, tf, camera in sets:
+                scene = Scene(volume, tf, camera, width=size, height=size)
+                progress.begin(f"{name}: exact image")
+                exact = exact_image(scene)
+                progress.advance(f"{name}: exact image")
+                for step_vox in steps:
+                    step = step_vox * volume.min_spacing
+                    for label, kind, skip in renderers:
+                        what = f"{name}: {label} step {step_vox:g}"
+                        progress.begin(what)
+                        if kind == "vtk":
+                            peer.setup(scene, step)
+                            image, times = time_frames(peer.frame, args.repeats)
+                        else:
+                            def render(scene=scene, step=step, skip=skip):
+                                return gl.render(scene, technique="raycast", step=step, skip_empty=skip)
+                            image, times = time_frames(render, args.repeats)
+                        rows.append(_row(name, scene, label, kind, skip, step_vox, step, times,
+                                         metrics.compare(image, exact)))
+                        progress.advance(what)
+    finally:
+        progress.close()
+        if peer is not None:
+            peer.close()
+    _add_ratios(rows)
+    info.update(_machine(), size=size, repeats=args.repeats, steps_voxels=steps,
+                datasets=[n for n, *_ in sets], vtk_note=vtk_note)
+    return rows, info
+
+
+def _vtk_version():
+    try:
+        from vtkmodules.vtkCommonCore import vtkVersion
+        return vtkVersion.GetVTKVersion()
+    except ImportError:
+        return None
+
+
+def _machine():
+    return {"date": datetime.datetime.now().isoformat(timespec="seconds"),
+            "python": platform.python_version(), "platform": platform.platform(),
+            "cpu_count": os.cpu_count(), "LP_NUM_THREADS": os.environ.get("LP_NUM_THREADS")}
+
+
+# -- output --------------------------------------------------------------------------------
+def _fmt(v, spec):
+    return "-" if v is None else format(v, spec)
+
+
+def format_table(rows):
+    head = ("data", "step", "renderer", "ms/frame", "RMSE", "max err", "PSNR dB", "t/VTK", "err/VTK")
+    lines = []
+    for r in rows:
+        lines.append((r["dataset"], f"{r['step_voxels']:g}", r["renderer"], _fmt(r["ms_median"], ".1f"),
+                      _fmt(r["rmse"], ".2e"), _fmt(r["max_abs"], ".3f"), _fmt(r["psnr"], ".1f"),
+                      _fmt(r["time_vs_vtk"], ".2f"), _fmt(r["rmse_vs_vtk"], ".2f")))
+    widths = [max(len(h), *(len(l[i]) for l in lines)) if lines else len(h) for i, h in enumerate(head)]
+    left = {0, 2}
+
+    def fmt_line(cells):
+        return "  ".join(c.ljust(w) if i in left else c.rjust(w) for i, (c, w) in enumerate(zip(cells, widths)))
+
+    out = [fmt_line(head), fmt_line(["-" * w for w in widths])]
+    prev = None
+    for r, l in zip(rows, lines):
+        if prev is not None and (r["dataset"], r["step_voxels"]) != prev:
+            out.append("")
+        prev = (r["dataset"], r["step_voxels"])
+        out.append(fmt_line(l))
+    return "\n".join(out)
+
+
+CSV_FIELDS = ("dataset", "width", "height", "renderer", "kind", "skip_empty", "step_voxels",
+              "step_world", "ms_median", "ms_min", "ms_max", "rmse", "max_abs", "psnr",
+              "time_vs_vtk", "rmse_vs_vtk")
+
+
+def _atomic_write(path, data: bytes):
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except FileNotFoundError:
+            pass
+        raise
+
+
+def output_paths(out):
+    """``out`` names a stem (a suffix .csv/.json/.png is dropped) or an existing folder
+    (then ``<folder>/bench``); returns the three paths."""
+    p = Path(out)
+    if p.is_dir():
+        p = p / "bench"
+    elif p.suffix.lower() in (".csv", ".json", ".png"):
+        p = p.with_suffix("")
+    return p.with_suffix(".csv"), p.with_suffix(".json"), p.with_suffix(".png")
+
+
+def write_results(rows, info, out):
+    csv_path, json_path, png_path = output_paths(out)
+    csv_path.parent.mkdir(parents=True, exist_ok=True)
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=CSV_FIELDS, extrasaction="ignore", lineterminator="\n")
+    w.writeheader()
+    for r in rows:
+        w.writerow({k: ("" if r[k] is None else r[k]) for k in CSV_FIELDS})
+    _atomic_write(csv_path, buf.getvalue().encode())
+
+    def clean(v):
+        return None if isinstance(v, float) and not math.isfinite(v) else v
+
+    doc = {"info": info, "rows": [{k: clean(v) for k, v in r.items()} for r in rows]}
+    _atomic_write(json_path, json.dumps(doc, indent=1, default=str).encode())
+    _atomic_write(png_path, figure_png(rows, info))
+    return csv_path, json_path, png_path
+
+
+def figure_png(rows, info) -> bytes:
+    """Error (RMSE) against time per frame, log-log, one panel per data set."""
+    import matplotlib
+    matplotlib.use("Agg", force=False)
+    from matplotlib.figure import Figure
+
+    names = list(dict.fromkeys(r["dataset"] for r in rows))
+    fig = Figure(figsize=(5.5 * len(names), 4.5), constrained_layout=True)
+    axes = fig.subplots(1, len(names), squeeze=False)[0]
+    styles = {"dvr_gl raycast": ("tab:blue", "o"), "dvr_gl raycast+skip": ("tab:green", "s"),
+              "VTK GPU raycast": ("tab:red", "^")}
+    for ax, name in zip(axes, names):
+        for label in dict.fromkeys(r["renderer"] for r in rows):
+            pts = sorted(((r["ms_median"], r["rmse"], r["step_voxels"]) for r in rows
+                          if r["dataset"] == name and r["renderer"] == label), key=lambda p: -p[2])
+            if not pts:
+                continue
+            color, marker = styles.get(label, (None, "x"))
+            ax.plot([p[0] for p in pts], [p[1] for p in pts], marker=marker, color=color, label=label)
+            for t, e, s in pts:
+                ax.annotate(f"{s:g}", (t, e), textcoords="offset points", xytext=(4, 4), fontsize=7, color=color)
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("median time per frame (ms)")
+        ax.set_ylabel("RMSE against exact (premultiplied RGBA)")
+        ax.set_title(f"{name}, {info.get('size')}x{info.get('size')}, step in voxels")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=8)
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110)
+    return buf.getvalue()
+
+
+# -- command line ----------------------------------------------------------------------------
+def add_arguments(parser):
+    parser.add_argument("--size", type=int, default=None,
+                        help="image width and height in pixels (default 512; 64 with --quick)")
+    parser.add_argument("--repeats", type=int, default=None,
+                        help="timed frames per measurement, after one warm-up frame (default 5; 2 with --quick)")
+    parser.add_argument("--quick", action="store_true",
+                        help="a small, fast run for a smoke test (64x64, 2 frames)")
+    parser.add_argument("--out", default=None,
+                        help="write <OUT>.csv, <OUT>.json and <OUT>.png (OUT a stem or an existing folder)")
+    parser.add_argument("--datasets", default="chest,head",
+                        help="comma-separated: chest (vtk.js LIDC2 CT), head (bundled CT head); default both")
+    parser.add_argument("--steps", default=",".join(f"{s:g}" for s in STEPS_VOXELS),
+                        help="comma-separated ray steps in voxels (the smallest spacing); default 1,0.5,0.25")
+    parser.add_argument("--chest", default=None,
+                        help=f"path of the chest CT (default $DVR_GL_DATA or {DEFAULT_DATA_DIR} / {CHEST_FILE})")
+    parser.add_argument("--backend", default="auto", help="dvr_gl GL backend (auto, egl, osmesa)")
+    parser.add_argument("--no-vtk", action="store_true", help="leave VTK out")
+    parser.add_argument("--vtk-float", action="store_true",
+                        help="give VTK the samples as float32 instead of their own type")
+    return parser
+
+
+def run_bench(args) -> int:
+    if args.size is None:
+        args.size = 64 if args.quick else 512
+    if args.repeats is None:
+        args.repeats = 2 if args.quick else 5
+    if args.size < 1 or args.repeats < 1:
+        print("dvr-gl bench: --size and --repeats must be positive", file=sys.stderr)
+        return 2
+    try:
+        steps = [float(s) for s in args.steps.split(",") if s.strip()]
+    except ValueError:
+        print(f"dvr-gl bench: --steps must be numbers separated by commas, got {args.steps!r}", file=sys.stderr)
+        return 2
+    if not steps or any(not (s > 0 and math.isfinite(s)) for s in steps):
+        print(f"dvr-gl bench: --steps must be positive, got {args.steps!r}", file=sys.stderr)
+        return 2
+    rows, info = run(args)
+    print(f"dvr_gl: {info['dvr_gl'].get('renderer')} ({info['dvr_gl'].get('backend')}); "
+          f"VTK: {info['vtk']['renderer'] + ' (VTK ' + str(info['vtk']['version']) + ')' if 'vtk' in info else 'not run'}; "
+          f"{info['size']}x{info['size']}, median of {info['repeats']} frames; "
+          f"t/VTK and err/VTK divide by VTK's row at the same step")
+    print(format_table(rows))
+    if args.out:
+        paths = write_results(rows, info, args.out)
+        print("wrote " + ", ".join(str(p) for p in paths))
+    return 0
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="dvr-gl bench", description=__doc__.split("\n\n")[0])
+    add_arguments(parser)
+    return run_bench(parser.parse_args(argv))
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,460 @@
+"""The ``dvr-gl`` command line: ``info``, ``render``, ``demo``, ``bench`` and ``view``.
+
+Exit codes: 0 success; 1 the work failed (no GL backend, a failed frame); 2 bad input
+(a message on stderr names the option and the value; no traceback, no output file);
+130 interrupted. Set ``DVR_GL_DEBUG=1`` to get tracebacks instead of one-line messages.
+
+``render`` takes a volume file (see :func:`dvr_gl.io.load_volume`) or a bundled data
+set, ``builtin:ct_head`` or ``builtin:synthetic``, e.g.::
+
+    dvr-gl render builtin:ct_head --elevation 90 --size 512x512 --out head.png
+    dvr-gl render scan.raw --shape 93,64,64 --dtype int16 --spacing 3.2,3.2,1.5 --out scan.png
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import math
+import os
+import platform
+import sys
+import time
+
+from . import io as dvr_io
+from .scene import MODES
+
+PROG = "dvr-gl"
+
+#: ``--tf`` presets: name -> function(volume) -> TransferFunction.
+PRESETS = {
+    "auto": lambda volume: _transfer().auto_preset(volume),
+    "ct_head": lambda volume: _data().ct_head_tf(),
+    "synthetic": lambda volume: _data().synthetic_tf(),
+}
+
+#: ``render`` inputs that name a bundled data set: name -> (loader, default preset).
+BUILTINS = {
+    "ct_head": (lambda: _data().ct_head(), "ct_head"),
+    "synthetic": (lambda: _data().synthetic(), "synthetic"),
+}
+
+# Which command-line option an InputError's field stands for.
+_OPTION_OF_FIELD = {"path": "INPUT", "shape": "--shape", "dtype": "--dtype", "spacing": "--spacing",
+                    "origin": "--origin", "size": "--size", "background": "--background"}
+
+
+def _transfer():
+    from . import transfer
+    return transfer
+
+
+def _data():
+    from . import data
+    return data
+
+
+class UsageError(Exception):
+    """Bad input found after parsing: ``option`` names it, the message says why."""
+
+    def __init__(self, option, message):
+        self.option = option
+        super().__init__(f"{option}: {message}")
+
+
+# ----------------------------------------------------------------------------- argument types
+
+def _arg_type(func, name):
+    def convert(text):
+        try:
+            return func(text)
+        except dvr_io.InputError as e:
+            raise argparse.ArgumentTypeError(e.detail) from None
+    convert.__name__ = name
+    return convert
+
+
+def _finite(text, positive=False):
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be finite, got {text!r}")
+    if positive and value <= 0:
+        raise argparse.ArgumentTypeError(f"must be positive, got {text!r}")
+    return value
+
+
+def _number(text):
+    return _finite(text)
+
+
+def _positive(text):
+    return _finite(text, positive=True)
+
+
+_size = _arg_type(dvr_io.parse_size, "size")
+_shape = _arg_type(lambda t: dvr_io.parse_triplet(t, "shape", kind=int, positive=True), "shape")
+_spacing = _arg_type(lambda t: dvr_io.parse_triplet(t, "spacing", positive=True), "spacing")
+_origin = _arg_type(lambda t: dvr_io.parse_triplet(t, "origin"), "origin")
+
+
+def _background_value(text):
+    rgb = dvr_io.parse_triplet(text, "background")
+    if not all(0 <= v <= 1 for v in rgb):
+        raise dvr_io.InputError("background", f"components must lie in [0, 1] (1,1,1 is white), got {text!r}")
+    return rgb
+
+
+_background = _arg_type(_background_value, "background")
+
+
+# ----------------------------------------------------------------------------- the parser
+
+def build_parser(bench_module=None):
+    """The argument parser; ``bench_module`` (dvr_gl.bench, if loaded) adds its options."""
+    from . import __version__
+
+    parser = argparse.ArgumentParser(
+        prog=PROG, description="Direct volume rendering with OpenGL, headless (EGL or OSMesa).")
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub.required = True
+
+    sub.add_parser("info", help="list the GL backends, their renderer, version and limits",
+                   description="Try each headless GL backend and print what it offers.")
+
+    r = sub.add_parser(
+        "render", help="render a volume to a PNG",
+        description="Render a volume to a PNG. INPUT is a volume file (.npy, .npz, .nrrd, .nhdr, "
+                    ".mhd, .mha; any other name is raw samples and needs --shape, --dtype and "
+                    "--spacing) or a bundled data set: builtin:ct_head, builtin:synthetic.")
+    r.add_argument("input", metavar="INPUT", help="volume file or builtin:NAME")
+    r.add_argument("--out", "-o", required=True, metavar="IMAGE.png", help="the PNG to write")
+    r.add_argument("--tf", metavar="PRESET|FILE.json",
+                   help=f"transfer function: a preset ({', '.join(PRESETS)}) or a JSON file "
+                        "{\"color\": [[s, r, g, b], ...], \"opacity\": [[s, a], ...], \"unit_distance\": u}; "
+                        "default: auto (the data set's own for builtin inputs)")
+    r.add_argument("--technique", default="raycast", help="rendering technique (default: raycast)")
+    r.add_argument("--step", type=_positive, metavar="S",
+                   help="sampling step in world units (default: the renderer's)")
+    r.add_argument("--mode", choices=MODES,
+                   help="optical model (default: composite, or isosurface when --iso is given)")
+    r.add_argument("--iso", type=_number, metavar="V", help="iso-value for --mode isosurface (data units)")
+    r.add_argument("--size", type=_size, default=(512, 512), metavar="WxH",
+                   help="image size in pixels (default: 512x512)")
+    r.add_argument("--azimuth", type=_number, default=0.0, metavar="DEG",
+                   help="turn the camera about +y (default: 0, looking along -z)")
+    r.add_argument("--elevation", type=_number, default=0.0, metavar="DEG",
+                   help="then raise it about its right axis (default: 0)")
+    r.add_argument("--zoom", type=_positive, default=1.0, metavar="F", help="> 1 moves closer (default: 1)")
+    r.add_argument("--fov", type=_positive, default=30.0, metavar="DEG",
+                   help="vertical field of view (default: 30)")
+    r.add_argument("--ortho", action="store_true", help="orthographic instead of perspective projection")
+    r.add_argument("--background", type=_background, metavar="R,G,B",
+                   help="composite over this colour (components in [0, 1]) and write RGB; "
+                        "default: write un-premultiplied RGBA")
+    raw = r.add_argument_group("raw and overriding geometry")
+    raw.add_argument("--shape", type=_shape, metavar="NZ,NY,NX", help="sample counts of a raw file, z slowest")
+    raw.add_argument("--dtype", metavar="D", help="sample type of a raw file: uint8, int16, <f4, >u2, ...")
+    raw.add_argument("--spacing", type=_spacing, metavar="SX,SY,SZ",
+                     help="sample spacing (required for raw files; replaces the file's otherwise)")
+    raw.add_argument("--origin", type=_origin, metavar="OX,OY,OZ", help="world position of the first sample")
+    raw.add_argument("--mask-nonfinite", action="store_true",
+                     help="treat NaN and inf samples as outside the volume instead of rejecting them")
+    r.add_argument("--backend", choices=("auto", "egl", "osmesa"), default="auto",
+                   help="headless GL backend (default: auto, EGL then OSMesa)")
+
+    d = sub.add_parser("demo", help="render the bundled demo scenes to PNGs",
+                       description="Render the bundled demo scenes into a folder.")
+    d.add_argument("--out-dir", default=".", metavar="DIR", help="folder for the images (default: .)")
+
+    b = sub.add_parser("bench", help="time the techniques", description="Time the techniques.")
+    if bench_module is not None:
+        bench_module.add_arguments(b)
+    else:
+        b.add_argument("bench_args", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)
+
+    v = sub.add_parser("view", help="open the interactive viewer (arguments go to the viewer)",
+                       add_help=False, description="Open the interactive viewer.")
+    v.add_argument("view_args", nargs=argparse.REMAINDER, help="arguments for the viewer")
+    return parser
+
+
+# ----------------------------------------------------------------------------- commands
+
+def cmd_info(args, out=None, err=None):
+    out = out or sys.stdout
+    import numpy
+    from . import __version__
+    try:
+        import moderngl
+        mgl = getattr(moderngl, "__version__", "?")
+    except ImportError as e:
+        mgl = f"not installed ({e})"
+    print(f"dvr_gl {__version__}; python {platform.python_version()}, numpy {numpy.__version__}, "
+          f"moderngl {mgl}", file=out)
+    try:
+        from .gl import context
+    except ImportError as e:
+        print(f"GL context support is not available: {e}", file=out)
+        return 1
+    working = 0
+    for name in context.BACKENDS:
+        try:
+            ctx = context.create_context(name)
+        except Exception as e:  # every failure is a line of the report, not a crash
+            print(f"{name}: failed: {_reason(e)}", file=out)
+            continue
+        try:
+            facts = context.describe(ctx)
+        except Exception as e:
+            print(f"{name}: context created, but describing it failed: {_reason(e)}", file=out)
+            continue
+        finally:
+            release = getattr(ctx, "release", None)
+            if callable(release):
+                try:
+                    release()
+                except Exception:
+                    pass
+        working += 1
+        print(f"{name}: ok", file=out)
+        for key, value in dict(facts).items():
+            print(f"  {key}: {value}", file=out)
+    if not working:
+        print("no GL backend works: install Mesa's EGL (libegl1, libgl1-mesa-dri) or OSMesa "
+              "(libosmesa6)", file=out)
+    return 0 if working else 1
+
+
+def _reason(exc):
+    text = str(exc).strip().splitlines()
+    return f"{type(exc).__name__}: {text[0] if text else ''}".rstrip(": ")
+
+
+def _load_input(args):
+    """The volume and the default preset name."""
+    if args.input.startswith("builtin:"):
+        name = args.input[len("builtin:"):].replace("-", "_")
+        if name not in BUILTINS:
+            raise UsageError("INPUT", f"no bundled data set {name!r}; there are "
+                                      f"{', '.join('builtin:' + n for n in BUILTINS)}")
+        for option, value in (("--shape", args.shape), ("--dtype", args.dtype)):
+            if value is not None:
+                raise UsageError(option, f"is for raw files, not the bundled {args.input}")
+        loader, preset = BUILTINS[name]
+        volume = loader()
+        if args.spacing is not None or args.origin is not None:
+            from .scene import Volume
+            volume = Volume(volume.data, spacing=args.spacing or volume.spacing,
+                            origin=args.origin or volume.origin)
+        return volume, preset
+    volume = dvr_io.load_volume(args.input, shape=args.shape, dtype=args.dtype, spacing=args.spacing,
+                                origin=args.origin, mask_nonfinite=args.mask_nonfinite)
+    return volume, "auto"
+
+
+def _resolve_tf(spec, volume, default):
+    from .transfer import load_tf_json
+
+    if spec is None:
+        return default, PRESETS[default](volume)
+    key = spec.replace("-", "_")
+    if key in PRESETS:  # a file that happens to have a preset's name: pass it as ./NAME
+        return key, PRESETS[key](volume)
+    if os.path.isfile(spec):
+        try:
+            return spec, load_tf_json(spec)
+        except (ValueError, TypeError) as e:
+            raise UsageError("--tf", str(e)) from None
+        except OSError as e:
+            raise UsageError("--tf", f"cannot read {spec!r}: {e}") from None
+    if spec.lower().endswith(".json"):
+        raise UsageError("--tf", f"no such file {spec!r}")
+    raise UsageError("--tf", f"{spec!r} is neither a preset ({', '.join(PRESETS)}) nor a file")
+
+
+def _check_out(path):
+    if not path.lower().endswith(".png"):
+        raise UsageError("--out", f"must name a .png file, got {path!r}")
+    directory = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(directory):
+        raise UsageError("--out", f"the folder {directory!r} does not exist")
+    if os.path.isdir(path):
+        raise UsageError("--out", f"{path!r} is a folder")
+
+
+def _describe_tf(name, tf):
+    lo, hi = float(tf.knots[0]), float(tf.knots[-1])
+    return f"{name} ({lo:g}..{hi:g}, unit distance {tf.unit_distance:g})"
+
+
+def cmd_render(args, out=None):
+    out = out or sys.stdout
+    from .scene import Scene, default_camera
+
+    _check_out(args.out)
+    mode = args.mode or ("isosurface" if args.iso is not None else "composite")
+    if mode == "isosurface" and args.iso is None:
+        raise UsageError("--iso", "an iso-value is required with --mode isosurface")
+    if args.iso is not None and mode != "isosurface":
+        raise UsageError("--iso", f"is only used with --mode isosurface, not --mode {mode}")
+    if args.dtype is not None:
+        try:
+            dvr_io._parse_dtype(args.dtype)
+        except dvr_io.InputError as e:
+            raise UsageError("--dtype", e.detail) from None
+
+    t0 = time.perf_counter()
+    volume, default_preset = _load_input(args)
+    tf_name, tf = _resolve_tf(args.tf, volume, default_preset)
+    camera = default_camera(volume, azimuth=args.azimuth, elevation=args.elevation, zoom=args.zoom,
+                            fov=args.fov, ortho=args.ortho)
+    width, height = args.size
+    scene = Scene(volume, tf, camera, width=width, height=height, mode=mode, iso_value=args.iso)
+    t_load = time.perf_counter() - t0
+
+    import dvr_gl
+    renderer_kwargs = {} if args.backend == "auto" else {"backend": args.backend}
+    render_kwargs = {"technique": args.technique}
+    if args.step is not None:
+        render_kwargs["step"] = args.step
+    t1 = time.perf_counter()
+    with dvr_gl.Renderer(**renderer_kwargs) as renderer:
+        t2 = time.perf_counter()
+        image = renderer.render(scene, **render_kwargs)
+        t3 = time.perf_counter()
+        backend = _backend_name(renderer, args.backend)
+    dvr_io.save_png(args.out, image, background=args.background)
+
+    nz, ny, nx = volume.shape
+    sx, sy, sz = (float(v) for v in volume.spacing)
+    lo, hi = volume.data_range
+    view = f"azimuth {args.azimuth:g}, elevation {args.elevation:g}, zoom {args.zoom:g}"
+    view += ", orthographic" if args.ortho else f", fov {args.fov:g}"
+    step = f"step {args.step:g}" if args.step is not None else "default step"
+    print(f"volume     {args.input}: {nx}x{ny}x{nz} (x, y, z) {volume.data.dtype}, spacing {sx:g},{sy:g},{sz:g}, "
+          f"values {lo:g}..{hi:g}", file=out)
+    print(f"transfer   {_describe_tf(tf_name, tf)}", file=out)
+    print(f"rendered   {args.technique}, mode {mode}" + (f" {args.iso:g}" if mode == "isosurface" else "")
+          + f", {step}, {width}x{height}, {view}, backend {backend}", file=out)
+    print(f"time       load {t_load:.3f} s, GL context {t2 - t1:.3f} s, first frame {t3 - t2:.3f} s "
+          "(includes shader compile and upload)", file=out)
+    print(f"wrote      {args.out}" + (" (RGB over background)" if args.background else " (RGBA)"), file=out)
+    return 0
+
+
+def _backend_name(renderer, requested):
+    for attr in ("backend_name", "backend"):
+        value = getattr(renderer, attr, None)
+        if isinstance(value, str):
+            return value
+    return requested
+
+
+def cmd_demo(args):
+    try:
+        demo = importlib.import_module("dvr_gl.demo")
+    except ModuleNotFoundError as e:
+        if e.name != "dvr_gl.demo":
+            raise
+        print(f"{PROG} demo: the demo is not available yet", file=sys.stderr)
+        return 2
+    return int(demo.run_demo(out_dir=args.out_dir) or 0)
+
+
+def cmd_bench(args, bench_module):
+    if bench_module is None:
+        print(f"{PROG} bench: the benchmark is not available yet", file=sys.stderr)
+        return 2
+    return int(bench_module.run_bench(args) or 0)
+
+
+def cmd_view(args):
+    try:
+        viewer = importlib.import_module("dvr_gl.viewer")
+    except ModuleNotFoundError as e:
+        if e.name == "dvr_gl.viewer":
+            print(f"{PROG} view: the interactive viewer is not available yet", file=sys.stderr)
+            return 2
+        if e.name == "glfw" or (e.name or "").startswith("glfw."):
+            print(f"{PROG} view: the interactive viewer needs glfw (pip install glfw): {e}", file=sys.stderr)
+            return 2
+        raise
+    return int(viewer.main(list(args.view_args)) or 0)
+
+
+def _load_bench(argv):
+    """dvr_gl.bench when the command is ``bench`` (its options join the parser), else None."""
+    command = next((a for a in argv if not a.startswith("-")), None)
+    if command != "bench":
+        return None
+    try:
+        return importlib.import_module("dvr_gl.bench")
+    except ModuleNotFoundError as e:
+        if e.name != "dvr_gl.bench":
+            raise
+        return None
+
+
+# ----------------------------------------------------------------------------- main
+
+def main(argv=None) -> int:
+    """Run the command line; returns the exit status (0, 1, 2 or 130)."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    debug = bool(os.environ.get("DVR_GL_DEBUG"))
+    bench_module = _load_bench(argv)
+    parser = build_parser(bench_module)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as e:  # argparse: --help, --version, or a usage error (already printed)
+        return e.code if isinstance(e.code, int) else (0 if e.code is None else 2)
+    command = args.command
+    try:
+        if command == "info":
+            return cmd_info(args)
+        if command == "demo":
+            return cmd_demo(args)
+        if command == "bench":
+            return cmd_bench(args, bench_module)
+        if command == "view":
+            return cmd_view(args)
+        return _run_render(args, debug)
+    except KeyboardInterrupt:
+        print(f"{PROG} {command}: interrupted", file=sys.stderr)
+        return 130
+
+
+def _run_render(args, debug):
+    """``render`` with its errors turned into one-line messages and exit codes."""
+    try:
+        return cmd_render(args)
+    except UsageError as e:
+        if debug:
+            raise
+        return _fail("render", str(e), 2)
+    except dvr_io.InputError as e:
+        if debug:
+            raise
+        option = _OPTION_OF_FIELD.get(e.field)
+        return _fail("render", f"{option}: {e.detail}" if option else f"INPUT: {e}", 2)
+    except (ValueError, TypeError, NotImplementedError) as e:
+        # The scene and the renderer validate their input and name the parameter.
+        if debug:
+            raise
+        return _fail("render", str(e).replace("pass mask_nonfinite=True", "pass --mask-nonfinite"), 2)
+    except (RuntimeError, OSError) as e:  # no GL context, a failed frame, a full disk
+        if debug:
+            raise
+        return _fail("render", f"{type(e).__name__}: {e}", 1)
+
+
+def _fail(command, message, code):
+    print(f"{PROG} {command}: error: {message}", file=sys.stderr)
+    return code
+
+
+if __name__ == "__main__":
+    sys.exit(main())

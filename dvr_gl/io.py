@@ -1,0 +1,652 @@
+"""Loading volumes and saving images.
+
+:func:`load_volume` reads a structured scalar volume into a :class:`dvr_gl.Volume`:
+
+- ``.npy`` -- a 3-D array (nz, ny, nx); spacing 1 unless given.
+- ``.npz`` -- an array ``data`` (nz, ny, nx) and optionally ``spacing`` and ``origin``
+  (x, y, z), the layout of the bundled data sets.
+- ``.nrrd`` / ``.nhdr`` -- NRRD through pynrrd, attached or detached, including the
+  multi-file forms of ``data file:`` that pynrrd does not read itself
+  (``<format> <min> <max> <step> [<subdim>]`` and ``LIST [<subdim>]``). Spacing comes from
+  ``space directions`` (the length of each axis vector) or ``spacings``, the origin from
+  ``space origin``. The volume is axis-aligned: a direction matrix that is not a positive
+  diagonal is not applied (a warning says so), as in VTK's image data without a direction.
+- ``.mhd`` / ``.mha`` -- MetaImage (header plus raw, zlib or local data).
+- anything else, ``.raw`` and ``.raw.gz`` included -- raw samples, x fastest, which need
+  ``shape`` (nz, ny, nx), ``dtype`` (a NumPy name such as ``int16`` or ``>u2`` for big
+  endian) and ``spacing``; a name ending in ``.gz`` is gunzipped first.
+
+``spacing`` and ``origin``, when given, replace what the file says. ``shape`` and
+``dtype`` describe raw files; for self-describing files they are checks. Samples are
+returned in native byte order; types the Volume does not hold are widened without loss
+(int8 -> int16, float16 -> float32, bool -> uint8, 32/64-bit integers -> float32 or
+float64 when every value is exactly representable), anything else is an error.
+
+Every error is an :class:`InputError` (a ``ValueError``) whose ``field`` names what was
+wrong (``path``, ``shape``, ``dtype``, ``spacing``, a header field, ...) and whose message
+shows the offending value; a missing file raises :class:`MissingFileError`, which is also
+a ``FileNotFoundError``.
+
+:func:`save_png` writes a premultiplied float RGBA image (conventions section 7)
+atomically; :func:`parse_size` and :func:`parse_triplet` parse command-line values.
+"""
+
+from __future__ import annotations
+
+import bz2
+import gzip
+import math
+import os
+import re
+import secrets
+import warnings
+import zlib
+
+import numpy as np
+
+from .scene import MAX_IMAGE_SIDE, Volume
+
+__all__ = ["InputError", "MissingFileError", "load_volume", "save_png", "to_png_array",
+           "parse_size", "parse_triplet", "RAW_DTYPES"]
+
+#: dtypes accepted for raw files (any byte order); the Volume holds uint8, uint16, int16,
+#: float32 and float64, the others are widened as the module docstring says.
+RAW_DTYPES = ("uint8", "int8", "uint16", "int16", "uint32", "int32", "uint64", "int64",
+              "float16", "float32", "float64")
+
+_VOLUME_DTYPES = (np.uint8, np.uint16, np.int16, np.float32, np.float64)
+
+
+class InputError(ValueError):
+    """Bad input: ``field`` names what was wrong, ``detail`` says how (with the value)."""
+
+    def __init__(self, field, detail):
+        self.field = field
+        self.detail = detail
+        super().__init__(f"{field}: {detail}")
+
+
+class MissingFileError(InputError, FileNotFoundError):
+    """A file that should exist does not."""
+
+
+# ----------------------------------------------------------------------------- parsing
+
+def _triplet(value, name, kind=float, positive=False):
+    """Three numbers from "a,b,c" or a sequence, checked; ``kind`` int or float."""
+    what = "integers" if kind is int else "numbers"
+    example = "64,64,93" if kind is int else "1,2,3"
+    if isinstance(value, str):
+        parts = [p.strip() for p in value.split(",")]
+        if len(parts) != 3 or not all(parts):
+            raise InputError(name, f"expected three comma-separated {what} like {example}, got {value!r}")
+        try:
+            nums = tuple(kind(p) for p in parts)
+        except ValueError:
+            raise InputError(name, f"expected three comma-separated {what} like {example}, got {value!r}") from None
+    else:
+        try:
+            items = list(value)
+        except TypeError:
+            raise InputError(name, f"expected three {what}, got {value!r}") from None
+        if len(items) != 3:
+            raise InputError(name, f"expected three {what}, got {value!r}")
+        nums = []
+        for v in items:
+            if kind is int:
+                if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)):
+                    raise InputError(name, f"expected three integers, got {value!r}")
+                nums.append(int(v))
+            else:
+                try:
+                    nums.append(float(v))
+                except (TypeError, ValueError):
+                    raise InputError(name, f"expected three numbers, got {value!r}") from None
+        nums = tuple(nums)
+    if kind is float and not all(math.isfinite(v) for v in nums):
+        raise InputError(name, f"must be finite, got {value!r}")
+    if positive and not all(v > 0 for v in nums):
+        raise InputError(name, f"must be positive on every axis, got {value!r}")
+    return nums
+
+
+def parse_triplet(text, name="value", kind=float, positive=False):
+    """``"1,2,3"`` -> ``(1.0, 2.0, 3.0)`` (``kind=int`` for integers); errors name ``name``."""
+    return _triplet(text, name, kind=kind, positive=positive)
+
+
+def parse_size(text, name="size"):
+    """``"640x480"`` -> ``(640, 480)`` (width, height); ``"512"`` means 512x512."""
+    s = str(text).strip().lower().replace("\u00d7", "x")
+    m = re.fullmatch(r"(\d+)\s*(?:x\s*(\d+))?", s)
+    if not m:
+        raise InputError(name, f"expected WIDTHxHEIGHT in pixels like 512x512, got {text!r}")
+    w = int(m.group(1))
+    h = int(m.group(2)) if m.group(2) is not None else w
+    for v in (w, h):
+        if not 1 <= v <= MAX_IMAGE_SIDE:
+            raise InputError(name, f"width and height must be between 1 and {MAX_IMAGE_SIDE} pixels, got {text!r}")
+    return w, h
+
+
+def _parse_dtype(dtype, name="dtype"):
+    try:
+        dt = np.dtype(dtype)
+    except TypeError:
+        dt = None
+    if dt is None or dt.fields is not None or dt.subdtype is not None or dt.newbyteorder("=").name not in RAW_DTYPES:
+        raise InputError(name, f"unsupported {dtype!r}; use one of {', '.join(RAW_DTYPES)} "
+                               "(prefix < or > for little or big endian)")
+    return dt
+
+
+# ----------------------------------------------------------------------------- loading
+
+def load_volume(path, shape=None, dtype=None, spacing=None, origin=None, mask_nonfinite=False) -> Volume:
+    """Read a volume file (see the module docstring for formats); returns a Volume."""
+    try:
+        path = os.fspath(path)
+    except TypeError:
+        raise InputError("path", f"expected a file name, got {path!r}") from None
+    if not os.path.exists(path):
+        raise MissingFileError("path", f"no such file {path!r}")
+    if os.path.isdir(path):
+        raise InputError("path", f"{path!r} is a directory, not a volume file")
+    if spacing is not None:
+        spacing = _triplet(spacing, "spacing", positive=True)
+    if origin is not None:
+        origin = _triplet(origin, "origin")
+    if shape is not None:
+        shape = _triplet(shape, "shape", kind=int, positive=True)
+    if dtype is not None:
+        dtype = _parse_dtype(dtype)
+
+    lower = path.lower()
+    if lower.endswith((".npy", ".npz", ".nrrd", ".nhdr", ".mhd", ".mha")):
+        if lower.endswith(".npy"):
+            data, file_spacing, file_origin = _load_npy(path), None, None
+        elif lower.endswith(".npz"):
+            data, file_spacing, file_origin = _load_npz(path)
+        elif lower.endswith((".nrrd", ".nhdr")):
+            data, file_spacing, file_origin = _load_nrrd(path)
+        else:
+            data, file_spacing, file_origin = _load_metaimage(path)
+        if data.ndim != 3:
+            raise InputError("shape", f"{path!r} holds a {data.ndim}-D array of shape {data.shape}; "
+                                      "a volume is 3-D (nz, ny, nx)")
+        if shape is not None and tuple(data.shape) != shape:
+            raise InputError("shape", f"{path!r} holds shape {tuple(data.shape)} (nz, ny, nx), "
+                                      f"not the {shape} given")
+        if dtype is not None and data.dtype.newbyteorder("=") != dtype.newbyteorder("="):
+            raise InputError("dtype", f"{path!r} holds {data.dtype.name}, not the {dtype.name} given")
+        spacing = spacing if spacing is not None else (file_spacing or (1.0, 1.0, 1.0))
+        origin = origin if origin is not None else (file_origin or (0.0, 0.0, 0.0))
+    else:
+        missing = [n for n, v in (("shape", shape), ("dtype", dtype), ("spacing", spacing)) if v is None]
+        if missing:
+            raise InputError(missing[0], f"a raw file such as {path!r} needs shape (nz,ny,nx), dtype and "
+                                         f"spacing (sx,sy,sz); missing: {', '.join(missing)}")
+        data = _load_raw(path, shape, dtype)
+        origin = origin if origin is not None else (0.0, 0.0, 0.0)
+    data = _volume_dtype(data, path)
+    return Volume(data, spacing=spacing, origin=origin, mask_nonfinite=mask_nonfinite)
+
+
+def _volume_dtype(data, path):
+    """Native byte order and a dtype the Volume holds, widened without loss."""
+    dt = data.dtype
+    if dt.fields is not None or dt.kind not in "biuf":
+        raise InputError("dtype", f"unsupported {dt!s} in {path!r}; volumes hold numbers "
+                                  f"({', '.join(RAW_DTYPES)})")
+    native = dt.newbyteorder("=")
+    if native.type in _VOLUME_DTYPES:
+        return data.astype(native, copy=False)
+    if dt.kind == "b":
+        return data.astype(np.uint8)
+    if native == np.int8:
+        return data.astype(np.int16)
+    if native == np.float16:
+        return data.astype(np.float32)
+    if dt.kind in "iu":  # 32- and 64-bit integers: to the float that holds every value
+        if data.size == 0:
+            return data.astype(np.float32)
+        lo, hi = int(data.min()), int(data.max())
+        biggest = max(abs(lo), abs(hi))
+        if biggest <= 2 ** 24:
+            return data.astype(np.float32)
+        if biggest <= 2 ** 53:
+            return data.astype(np.float64)
+        raise InputError("dtype", f"{dt.name} values in {path!r} reach {lo if abs(lo) > abs(hi) else hi}, "
+                                  "beyond what float64 holds exactly (2**53)")
+    raise InputError("dtype", f"unsupported {dt.name} in {path!r}; use one of {', '.join(RAW_DTYPES)}")
+
+
+def _read_bytes(path, field="path"):
+    try:
+        if path.lower().endswith(".gz"):
+            with gzip.open(path, "rb") as f:
+                return f.read()
+        with open(path, "rb") as f:
+            return f.read()
+    except FileNotFoundError:
+        raise MissingFileError(field, f"no such file {path!r}") from None
+    except (OSError, EOFError, zlib.error) as e:
+        raise InputError(field, f"cannot read {path!r}: {e}") from None
+
+
+def _load_raw(path, shape, dtype):
+    raw = _read_bytes(path)
+    need = int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
+    if len(raw) != need:
+        what = "gunzipped " if path.lower().endswith(".gz") else ""
+        hint = ""
+        if len(raw) > need:
+            hint = f" ({len(raw) - need} bytes too many: a header? this reader expects bare samples)"
+        raise InputError("shape", f"{what}file {path!r} holds {len(raw)} bytes, but shape {shape} (nz,ny,nx) "
+                                  f"of {dtype.name} needs {need}{hint}")
+    return np.frombuffer(raw, dtype=dtype).reshape(shape)
+
+
+def _load_npy(path):
+    try:
+        return np.load(path, allow_pickle=False)
+    except ValueError as e:
+        raise InputError("path", f"{path!r} is not a plain .npy array: {e}") from None
+    except OSError as e:
+        raise InputError("path", f"cannot read {path!r}: {e}") from None
+
+
+def _load_npz(path):
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            if "data" not in npz.files:
+                raise InputError("data", f"{path!r} has no array named 'data' (it has {sorted(npz.files)})")
+            data = npz["data"]
+            spacing = tuple(_triplet(npz["spacing"].tolist(), "spacing", positive=True)) if "spacing" in npz.files else None
+            origin = tuple(_triplet(npz["origin"].tolist(), "origin")) if "origin" in npz.files else None
+    except InputError:
+        raise
+    except (ValueError, OSError, zlib.error) as e:
+        raise InputError("path", f"cannot read {path!r} as .npz: {e}") from None
+    return data, spacing, origin
+
+
+# -- NRRD ----------------------------------------------------------------------------
+
+_FORMAT_RE = re.compile(r"%[-+ 0#]*\d*d")
+
+
+def _nrrd_lines(path):
+    """The header lines (magic included) up to the blank line that ends it (or EOF)."""
+    lines = []
+    with open(path, "rb") as f:
+        for raw in f:
+            line = raw.decode("latin-1").rstrip("\r\n")
+            if not line.strip():
+                break
+            lines.append(line)
+            if len(lines) > 100000:
+                raise InputError("path", f"{path!r}: NRRD header has no end")
+    if not lines or not lines[0].startswith("NRRD"):
+        raise InputError("path", f"{path!r} is not a NRRD file (it does not start with 'NRRD')")
+    return lines
+
+
+def _load_nrrd(path):
+    import nrrd
+
+    lines = _nrrd_lines(path)
+    file_list = None
+    for i, line in enumerate(lines):
+        key, _, value = line.partition(":")
+        if line.startswith("#") or value.startswith("="):
+            continue
+        if key.strip().lower() in ("data file", "datafile") and value.strip().split()[:1] == ["LIST"]:
+            file_list = [ln.strip() for ln in lines[i + 1:] if ln.strip()]
+            lines = lines[:i + 1]
+            break
+    try:
+        header = nrrd.read_header(lines)
+    except (nrrd.NRRDError, ValueError, KeyError) as e:
+        raise InputError("path", f"{path!r}: bad NRRD header: {e}") from None
+    for field in ("dimension", "type", "encoding", "sizes"):
+        if field not in header:
+            raise InputError(field, f"{path!r}: the NRRD header lacks the required field {field!r}")
+    dim = int(header["dimension"])
+    sizes = [int(s) for s in header["sizes"]]
+    if dim != 3 or len(sizes) != 3:
+        raise InputError("dimension", f"{path!r} is {dim}-D (sizes {sizes}); a volume is 3-D")
+    if header["type"] == "block":
+        raise InputError("type", f"{path!r}: NRRD type 'block' is not a number")
+
+    spec_key = "data file" if "data file" in header else ("datafile" if "datafile" in header else None)
+    spec = header.get(spec_key) if spec_key else None
+    try:
+        if file_list is not None:
+            parts = spec.split()
+            subdim = _subdim(parts[1:], dim, path, spec)
+            data = _read_nrrd_pieces(header, spec_key, file_list, subdim, sizes, path)
+        elif spec is not None and _is_format_spec(spec):
+            parts = spec.split()
+            fmt, (lo, hi, step) = parts[0], _ints(parts[1:4], path, spec)
+            subdim = _subdim(parts[4:], dim, path, spec)
+            if step == 0:
+                raise InputError("data file", f"{path!r}: file number step must not be 0 in {spec!r}")
+            if (hi - lo) * step < 0:
+                raise InputError("data file", f"{path!r}: file number max {hi} is not reached from min {lo} "
+                                              f"by step {step} in {spec!r}")
+            try:
+                names = [fmt % i for i in range(lo, hi + (1 if step > 0 else -1), step)]
+            except (TypeError, ValueError) as e:
+                raise InputError("data file", f"{path!r}: bad file name format {fmt!r}: {e}") from None
+            data = _read_nrrd_pieces(header, spec_key, names, subdim, sizes, path)
+        else:
+            if spec is not None:
+                target = spec if os.path.isabs(spec) else os.path.join(os.path.dirname(path), spec)
+                if not os.path.exists(target):
+                    raise MissingFileError("data file", f"{path!r} names the data file {spec!r}, "
+                                                        f"which does not exist ({target!r})")
+            data, _ = nrrd.read(path, index_order="C")
+    except nrrd.NRRDError as e:
+        raise InputError("path", f"{path!r}: {e}") from None
+    except (OSError, EOFError, zlib.error) as e:
+        if isinstance(e, InputError):
+            raise
+        raise InputError("path", f"cannot read the data of {path!r}: {e}") from None
+    except ValueError as e:  # numpy reshape / frombuffer on a short or long file
+        if isinstance(e, InputError):
+            raise
+        raise InputError("sizes", f"{path!r}: the data does not match sizes {sizes} of {header['type']}: {e}") from None
+    spacing, origin = _nrrd_geometry(header, path)
+    return data, spacing, origin
+
+
+def _is_format_spec(spec):
+    parts = spec.split()
+    if len(parts) not in (4, 5) or not _FORMAT_RE.search(parts[0].replace("%%", "")):
+        return False
+    return all(re.fullmatch(r"[-+]?\d+", p) for p in parts[1:])
+
+
+def _ints(parts, path, spec):
+    try:
+        return tuple(int(p) for p in parts)
+    except ValueError:
+        raise InputError("data file", f"{path!r}: expected integers in {spec!r}") from None
+
+
+def _subdim(parts, dim, path, spec):
+    if not parts:
+        return dim - 1
+    if len(parts) != 1:
+        raise InputError("data file", f"{path!r}: cannot parse {spec!r}")
+    (subdim,) = _ints(parts, path, spec)
+    if not 1 <= subdim <= dim:
+        raise InputError("data file", f"{path!r}: data file dimension {subdim} is outside [1, {dim}] in {spec!r}")
+    return subdim
+
+
+def _read_nrrd_pieces(header, spec_key, names, subdim, sizes, path):
+    """Read a NRRD whose data is split over several files, each holding a ``subdim``-D
+    piece (the fastest ``subdim`` axes; for ``subdim == dim``, equal slabs of the slowest
+    axis), through pynrrd's per-file reader (encodings, skips and endianness)."""
+    import nrrd
+
+    dim = len(sizes)
+    if not names:
+        raise InputError("data file", f"{path!r}: the data file list is empty")
+    if subdim < dim:
+        piece = sizes[:subdim]
+        count = int(np.prod(sizes[subdim:], dtype=np.int64))
+        if count != len(names):
+            raise InputError("data file", f"{path!r} names {len(names)} data files, but sizes {sizes} split into "
+                                          f"{subdim}-D pieces need {count}")
+    else:
+        if sizes[-1] % len(names):
+            raise InputError("data file", f"{path!r} names {len(names)} data files, which do not split the "
+                                          f"{sizes[-1]} slices of the slowest axis evenly")
+        piece = sizes[:-1] + [sizes[-1] // len(names)]
+    base = os.path.dirname(path)
+    chunks = []
+    for name in names:
+        target = name if os.path.isabs(name) else os.path.join(base, name)
+        if not os.path.exists(target):
+            raise MissingFileError("data file", f"{path!r} names the data file {name!r}, which does not exist "
+                                                f"({target!r})")
+        h = {k: v for k, v in header.items() if k not in ("data file", "datafile")}
+        h["dimension"] = len(piece)
+        h["sizes"] = np.array(piece)
+        h["data file"] = os.path.abspath(target)
+        try:
+            chunk = nrrd.read_data(h, filename=path, index_order="C")
+        except nrrd.NRRDError as e:
+            raise InputError("data file", f"{path!r}: data file {name!r}: {e}") from None
+        chunks.append(chunk.reshape(-1))
+    return np.concatenate(chunks).reshape(tuple(sizes[::-1]))
+
+
+def _nrrd_geometry(header, path):
+    spacing = origin = None
+    directions = header.get("space directions")
+    if directions is not None:
+        d = np.array(directions, dtype=np.float64)
+        if d.ndim != 2 or d.shape[0] != 3 or not np.all(np.isfinite(d)):
+            raise InputError("space directions", f"{path!r}: expected a vector per axis, got {directions!r}")
+        lengths = np.linalg.norm(d, axis=1)
+        if np.any(lengths <= 0):
+            raise InputError("space directions", f"{path!r}: an axis vector has length 0 in {directions!r}")
+        spacing = tuple(float(v) for v in lengths)
+        if d.shape[1] != 3 or not np.allclose(d, np.diag(np.diagonal(d)), rtol=0, atol=1e-9 * lengths.max()) \
+                or np.any(np.diagonal(d) < 0):
+            warnings.warn(f"{path}: space directions {d.tolist()} are not a positive diagonal; the volume is "
+                          "used axis-aligned in index order with spacing = the vector lengths "
+                          f"{spacing}", stacklevel=4)
+    elif "spacings" in header:
+        s = np.array(header["spacings"], dtype=np.float64)
+        if s.shape != (3,) or not np.all(np.isfinite(s)) or np.any(s <= 0):
+            raise InputError("spacings", f"{path!r}: must be three positive numbers, got {header['spacings']!r}")
+        spacing = tuple(float(v) for v in s)
+    if "space origin" in header:
+        o = np.array(header["space origin"], dtype=np.float64)
+        if o.shape != (3,) or not np.all(np.isfinite(o)):
+            raise InputError("space origin", f"{path!r}: must be three finite numbers, got {header['space origin']!r}")
+        origin = tuple(float(v) for v in o)
+    return spacing, origin
+
+
+# -- MetaImage -------------------------------------------------------------------------
+
+_MET_TYPES = {"MET_UCHAR": "u1", "MET_CHAR": "i1", "MET_USHORT": "u2", "MET_SHORT": "i2",
+              "MET_UINT": "u4", "MET_INT": "i4", "MET_ULONG": "u4", "MET_LONG": "i4",
+              "MET_ULONG_LONG": "u8", "MET_LONG_LONG": "i8", "MET_FLOAT": "f4", "MET_DOUBLE": "f8"}
+
+
+def _load_metaimage(path):
+    fields = {}
+    header_len = 0
+    with open(path, "rb") as f:
+        for raw in f:
+            header_len += len(raw)
+            line = raw.decode("latin-1").strip()
+            if not line or line.startswith("#"):
+                continue
+            key, sep, value = line.partition("=")
+            if not sep:
+                raise InputError("path", f"{path!r}: not a MetaImage header line: {line!r}")
+            fields[key.strip().lower()] = value.strip()
+            if key.strip().lower() == "elementdatafile":
+                break  # the last header field; LOCAL data follows
+            if len(fields) > 1000:
+                raise InputError("path", f"{path!r}: MetaImage header has no ElementDataFile")
+
+    def need(key):
+        if key.lower() not in fields:
+            raise InputError(key, f"{path!r}: the MetaImage header lacks {key}")
+        return fields[key.lower()]
+
+    ndims = need("NDims")
+    if ndims.strip() != "3":
+        raise InputError("NDims", f"{path!r} is {ndims}-D; a volume is 3-D")
+    try:
+        dims = [int(v) for v in need("DimSize").split()]
+    except ValueError:
+        raise InputError("DimSize", f"{path!r}: expected three integers, got {fields['dimsize']!r}") from None
+    if len(dims) != 3 or min(dims) < 1:
+        raise InputError("DimSize", f"{path!r}: expected three positive integers, got {fields['dimsize']!r}")
+    channels = fields.get("elementnumberofchannels", "1").strip()
+    if channels != "1":
+        raise InputError("ElementNumberOfChannels", f"{path!r} has {channels} channels; a volume has 1")
+    etype = need("ElementType").strip().upper()
+    if etype not in _MET_TYPES:
+        raise InputError("ElementType", f"{path!r}: unsupported {etype!r}; use one of {', '.join(_MET_TYPES)}")
+    msb = fields.get("elementbyteordermsb", fields.get("binarydatabyteordermsb", "False")).strip().lower() == "true"
+    dtype = np.dtype(_MET_TYPES[etype]).newbyteorder(">" if msb else "<")
+    def floats(key, name, positive=False):
+        try:
+            values = [float(v) for v in fields[key].split()]
+        except ValueError:
+            raise InputError(name, f"{path!r}: expected three numbers, got {fields[key]!r}") from None
+        return _triplet(values, name, positive=positive)
+
+    spacing = origin = None
+    for key, name in (("elementspacing", "ElementSpacing"), ("elementsize", "ElementSize")):
+        if key in fields:
+            spacing = floats(key, name, positive=True)
+            break
+    for key, name in (("offset", "Offset"), ("position", "Position"), ("origin", "Origin")):
+        if key in fields:
+            origin = floats(key, name)
+            break
+    matrix = fields.get("transformmatrix")
+    if matrix is not None and matrix.split() != "1 0 0 0 1 0 0 0 1".split() and \
+            _float_list(matrix) != [1, 0, 0, 0, 1, 0, 0, 0, 1]:
+        warnings.warn(f"{path}: TransformMatrix {matrix} is not the identity; the volume is used "
+                      "axis-aligned in index order", stacklevel=4)
+    datafile = need("ElementDataFile")
+    if datafile.upper() == "LOCAL":
+        with open(path, "rb") as f:
+            f.seek(header_len)
+            raw = f.read()
+    else:
+        if datafile.split()[:1] == ["LIST"] or len(datafile.split()) > 1:
+            raise InputError("ElementDataFile", f"{path!r}: multi-file MetaImage data {datafile!r} is not supported")
+        target = datafile if os.path.isabs(datafile) else os.path.join(os.path.dirname(path), datafile)
+        if not os.path.exists(target):
+            raise MissingFileError("ElementDataFile", f"{path!r} names the data file {datafile!r}, which does not "
+                                                      f"exist ({target!r})")
+        raw = _read_bytes(target, "ElementDataFile")
+    if fields.get("compresseddata", "false").strip().lower() == "true":
+        try:
+            raw = zlib.decompress(raw)
+        except zlib.error as e:
+            raise InputError("CompressedData", f"{path!r}: cannot inflate the data: {e}") from None
+    need_bytes = int(np.prod(dims, dtype=np.int64)) * dtype.itemsize
+    try:
+        header_size = int(fields.get("headersize", "0"))
+    except ValueError:
+        raise InputError("HeaderSize", f"{path!r}: expected an integer, got {fields['headersize']!r}") from None
+    if header_size == -1:
+        raw = raw[len(raw) - need_bytes:] if len(raw) >= need_bytes else raw
+    elif header_size > 0:
+        raw = raw[header_size:]
+    if len(raw) != need_bytes:
+        raise InputError("DimSize", f"{path!r}: the data holds {len(raw)} bytes, but DimSize {dims} of "
+                                    f"{etype} needs {need_bytes}")
+    data = np.frombuffer(raw, dtype=dtype).reshape(dims[::-1])
+    return data, spacing, origin
+
+
+def _float_list(text):
+    try:
+        return [float(v) for v in text.split()]
+    except ValueError:
+        return None
+
+
+# ----------------------------------------------------------------------------- images
+
+def to_png_array(image, background=None):
+    """The 8-bit array :func:`save_png` writes: (H, W, 4) un-premultiplied RGBA, or
+    (H, W, 3) RGB composited over ``background``.
+
+    ``image`` is (H, W, 4) float premultiplied RGBA (conventions section 7), clipped to
+    [0, 1]. Without a background the colour is ``C / A`` (0 where the 8-bit alpha is 0);
+    with ``background = (r, g, b)`` in [0, 1] the pixel is ``C + (1 - A) * B``. Rounded to
+    the nearest of 256 levels.
+    """
+    if not isinstance(image, np.ndarray):
+        raise InputError("image", f"expected a numpy array (H, W, 4), got {type(image).__name__}")
+    if image.ndim != 3 or image.shape[2] != 4 or image.shape[0] < 1 or image.shape[1] < 1:
+        raise InputError("image", f"expected shape (H, W, 4) premultiplied RGBA, got {image.shape}")
+    if image.dtype.kind != "f":
+        raise InputError("image", f"expected floats in [0, 1], got dtype {image.dtype}")
+    img = image.astype(np.float64)
+    bad = ~np.isfinite(img)
+    if bad.any():
+        idx = tuple(int(i) for i in np.argwhere(bad)[0])
+        raise InputError("image", f"has non-finite values (first at (row, col, channel) {idx}: {image[idx]!r})")
+    img = np.clip(img, 0.0, 1.0)
+    colour, alpha = img[..., :3], img[..., 3:]
+    if background is None:
+        alpha8 = np.rint(alpha * 255)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            straight = np.where(alpha > 0, colour / alpha, 0.0)
+        rgb8 = np.rint(np.clip(straight, 0.0, 1.0) * 255)
+        rgb8[np.broadcast_to(alpha8 == 0, rgb8.shape)] = 0
+        return np.concatenate([rgb8, alpha8], axis=-1).astype(np.uint8)
+    bg = np.array(_triplet(background, "background"), dtype=np.float64)
+    if np.any(bg < 0) or np.any(bg > 1):
+        raise InputError("background", f"components must lie in [0, 1], got {tuple(bg.tolist())}")
+    out = colour + (1.0 - alpha) * bg
+    return np.rint(np.clip(out, 0.0, 1.0) * 255).astype(np.uint8)
+
+
+def save_png(path, image, background=None):
+    """Write ``image`` ((H, W, 4) float premultiplied RGBA, row 0 on top) to ``path``.
+
+    Without ``background`` the PNG is un-premultiplied RGBA (colour 0 where alpha is 0);
+    with ``background = (r, g, b)`` in [0, 1] it is RGB, ``C + (1 - A) * B``. 8 bits per
+    channel, rounded (see :func:`to_png_array`). The write is atomic: the PNG is written to
+    a temporary file in the same directory and renamed over ``path``, so ``path`` is
+    either untouched or complete, and nothing is left behind on an error. Returns
+    ``path``.
+    """
+    from PIL import Image
+
+    try:
+        path = os.fspath(path)
+    except TypeError:
+        raise InputError("path", f"expected a file name, got {path!r}") from None
+    pixels = to_png_array(image, background)  # validate before touching the disk
+    directory = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(directory):
+        raise MissingFileError("path", f"the directory {directory!r} of {path!r} does not exist")
+    if os.path.isdir(path):
+        raise InputError("path", f"{path!r} is a directory")
+    tmp, fd = _temporary(directory, os.path.basename(path))
+    try:
+        with os.fdopen(fd, "wb") as f:
+            Image.fromarray(pixels).save(f, format="PNG")
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except FileNotFoundError:
+            pass
+        raise
+    return path
+
+
+def _temporary(directory, name):
+    """A new file beside the target, created with the usual permissions (0666 less the
+    umask, as open() would give the target itself)."""
+    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0)
+    for _ in range(100):
+        tmp = os.path.join(directory, f".{name}.{secrets.token_hex(4)}.tmp")
+        try:
+            return tmp, os.open(tmp, flags, 0o666)
+        except FileExistsError:
+            continue
+    raise FileExistsError(f"could not create a temporary file in {directory!r}")
