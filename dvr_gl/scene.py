@@ -84,7 +84,7 @@ class Volume:
             if not self.mask_nonfinite:
                 bad = tuple(int(i) for i in np.argwhere(~finite)[0])
                 raise ValueError(
-                    f"data has non-finite values (first at index {bad}: {data[bad]!r}); "
+                    f"data has non-finite values (first at index {bad}: {data[bad].item()!r}); "
                     "pass mask_nonfinite=True to treat them as outside the domain")
             if not finite.any():
                 raise ValueError("data has no finite value at all")
@@ -168,10 +168,10 @@ def _control_points(name, points, width):
     pos = arr[:, 0]
     if np.any(np.diff(pos) <= 0):
         i = int(np.argmax(np.diff(pos) <= 0))
-        raise ValueError(f"{name} positions must be strictly increasing, got {pos[i]!r} then {pos[i + 1]!r}")
+        raise ValueError(f"{name} positions must be strictly increasing, got {pos[i].item()!r} then {pos[i + 1].item()!r}")
     vals = arr[:, 1:]
     if np.any(vals < 0) or np.any(vals > 1):
-        bad = vals[(vals < 0) | (vals > 1)][0]
+        bad = vals[(vals < 0) | (vals > 1)][0].item()
         raise ValueError(f"{name} values must lie in [0, 1], got {bad!r}")
     arr.setflags(write=False)
     return arr

@@ -1,0 +1,159 @@
+"""Every bad input to the scene model fails at construction with a message that names
+the parameter and the value."""
+
+import numpy as np
+import pytest
+
+import dvr_gl
+
+DATA = np.zeros((3, 4, 5), np.float32)
+VOL = dvr_gl.Volume(DATA)
+TF = dvr_gl.TransferFunction(color=[(0, 0, 0, 0), (1, 1, 1, 1)], opacity=[(0, 0), (1, 0.5)])
+CAM = dvr_gl.Camera((2, 1.5, 10), (2, 1.5, 1))
+
+
+@pytest.mark.parametrize("kwargs,exc,message", [
+    (dict(data=[[[1.0]]]), TypeError, "data must be a numpy array, got list"),
+    (dict(data=np.zeros((3, 4, 5), np.int32)), TypeError, "data dtype must be one of .*, got int32"),
+    (dict(data=np.zeros((3, 4, 5), bool)), TypeError, "got bool"),
+    (dict(data=np.zeros((4, 5))), ValueError, "data must be 3-D \\(nz, ny, nx\\), got ndim=2"),
+    (dict(data=np.zeros((1, 4, 5))), ValueError, "at least 2 samples on every axis, got shape=\\(1, 4, 5\\)"),
+    (dict(data=np.array([[[np.nan, 1], [1, 1]], [[1, 1], [1, 1]]])), ValueError, "non-finite values .*index \\(0, 0, 0\\): nan"),
+    (dict(spacing=(1, 0, 1)), ValueError, "spacing must be positive on every axis, got \\(1, 0, 1\\)"),
+    (dict(spacing=(1, -2, 1)), ValueError, "spacing must be positive"),
+    (dict(spacing=(1, np.inf, 1)), ValueError, "spacing must be finite"),
+    (dict(spacing=(1, 1)), ValueError, "spacing must have 3 components"),
+    (dict(spacing="abc"), TypeError, "spacing must be three numbers, got 'abc'"),
+    (dict(origin=(0, np.nan, 0)), ValueError, "origin must be finite"),
+])
+def test_volume_rejects(kwargs, exc, message):
+    args = dict(data=DATA)
+    args.update(kwargs)
+    with pytest.raises(exc, match=message):
+        dvr_gl.Volume(**args)
+
+
+def test_volume_all_nonfinite_even_when_masked():
+    with pytest.raises(ValueError, match="no finite value"):
+        dvr_gl.Volume(np.full((2, 2, 2), np.nan), mask_nonfinite=True)
+
+
+def test_volume_is_immutable_and_keeps_its_dtype():
+    data = np.arange(24, dtype=np.uint16).reshape(2, 3, 4)
+    v = dvr_gl.Volume(data)
+    data[0, 0, 0] = 99  # the volume holds its own copy
+    assert v.data[0, 0, 0] == 0 and v.data.dtype == np.uint16
+    with pytest.raises(ValueError):
+        v.data[0, 0, 0] = 1
+    assert v.data_range == (0.0, 23.0)
+    np.testing.assert_array_equal(v.dims, [4, 3, 2])
+
+
+@pytest.mark.parametrize("kwargs,exc,message", [
+    (dict(color=[(1, 0, 0, 0), (0, 1, 1, 1)]), ValueError, "color positions must be strictly increasing, got 1.0 then 0.0"),
+    (dict(opacity=[(0, 0), (0, 1)]), ValueError, "opacity positions must be strictly increasing, got 0.0 then 0.0"),
+    (dict(color=[(0, 1.5, 0, 0)]), ValueError, "color values must lie in \\[0, 1\\], got 1.5"),
+    (dict(opacity=[(0, -0.1)]), ValueError, "opacity values must lie in \\[0, 1\\], got -0.1"),
+    (dict(opacity=[(0, 2.0)]), ValueError, "opacity values must lie in \\[0, 1\\], got 2.0"),
+    (dict(color=[(0, 1, 1)]), ValueError, "color must be a non-empty list of 4-tuples"),
+    (dict(color=[]), ValueError, "color must be a non-empty list"),
+    (dict(opacity=[(0, np.nan)]), ValueError, "opacity must be finite"),
+    (dict(opacity="high"), TypeError, "opacity must be a list of 2-tuples of numbers, got 'high'"),
+    (dict(unit_distance=0), ValueError, "unit_distance must be positive, got 0"),
+    (dict(unit_distance=-1.0), ValueError, "unit_distance must be positive, got -1.0"),
+    (dict(unit_distance=float("inf")), ValueError, "unit_distance must be finite"),
+    (dict(unit_distance="1"), TypeError, "unit_distance must be a number, got '1'"),
+])
+def test_transfer_function_rejects(kwargs, exc, message):
+    args = dict(color=[(0, 0, 0, 0), (1, 1, 1, 1)], opacity=[(0, 0), (1, 1)])
+    args.update(kwargs)
+    with pytest.raises(exc, match=message):
+        dvr_gl.TransferFunction(**args)
+
+
+def test_transfer_function_is_piecewise_linear_and_clamped():
+    tf = dvr_gl.TransferFunction(color=[(10, 0, 0, 0), (20, 1, 0.5, 0)], opacity=[(0, 0.2), (10, 1.0)], unit_distance=2)
+    np.testing.assert_allclose(tf.color([5, 15, 25]), [[0, 0, 0], [0.5, 0.25, 0], [1, 0.5, 0]])
+    np.testing.assert_allclose(tf.opacity([-5, 5, 50]), [0.2, 0.6, 1.0])
+    assert tf.extinction(50) == np.inf
+    np.testing.assert_allclose(tf.extinction(-5), -np.log(0.8) / 2)
+    np.testing.assert_array_equal(tf.knots, [0, 10, 20])
+
+
+@pytest.mark.parametrize("kwargs,exc,message", [
+    (dict(eye=(1, 2, 3), target=(1, 2, 3)), ValueError, "eye must differ from target, both are \\(1.0, 2.0, 3.0\\)"),
+    (dict(up=(0, 0, 1)), ValueError, "up \\(0.0, 0.0, 1.0\\) is parallel to the view direction"),
+    (dict(up=(0, 0, 0)), ValueError, "up must be a non-zero vector"),
+    (dict(fov=0), ValueError, "fov must be positive, got 0"),
+    (dict(fov=-30), ValueError, "fov must be positive, got -30"),
+    (dict(fov=180), ValueError, "fov must be below 180 degrees, got 180"),
+    (dict(ortho_height=0.0), ValueError, "ortho_height must be positive, got 0.0"),
+    (dict(ortho_height=-2), ValueError, "ortho_height must be positive"),
+    (dict(eye=(0, np.nan, 1)), ValueError, "eye must be finite"),
+    (dict(target=(0, 1)), ValueError, "target must have 3 components"),
+])
+def test_camera_rejects(kwargs, exc, message):
+    args = dict(eye=(0, 0, 5), target=(0, 0, 0))
+    args.update(kwargs)
+    with pytest.raises(exc, match=message):
+        dvr_gl.Camera(**args)
+
+
+def test_camera_rays_through_pixel_centres():
+    cam = dvr_gl.Camera((0, 0, 10), (0, 0, 0), fov=90)
+    o, d = cam.rays(2, 2)
+    # 90 degrees: the view spans [-1, 1] at unit distance; pixel centres at +-0.5
+    expect = np.array([-0.5, 0.5, -1.0]) / np.linalg.norm([0.5, 0.5, 1.0])
+    np.testing.assert_allclose(d[0, 0], expect)  # row 0 on top, column 0 on the left
+    np.testing.assert_allclose(o, 0 * o + [0, 0, 10])
+    ortho = dvr_gl.Camera((0, 0, 10), (0, 0, 0), ortho_height=4.0)
+    o, d = ortho.rays(4, 2)
+    np.testing.assert_allclose(o[1, 3], [3.0, -1.0, 10.0])  # aspect 2: width 8
+    np.testing.assert_allclose(d[1, 3], [0, 0, -1])
+
+
+@pytest.mark.parametrize("kwargs,exc,message", [
+    (dict(volume=DATA), TypeError, "volume must be a dvr_gl.Volume, got ndarray"),
+    (dict(tf={"color": []}), TypeError, "tf must be a dvr_gl.TransferFunction, got dict"),
+    (dict(camera=None), TypeError, "camera must be a dvr_gl.Camera, got NoneType"),
+    (dict(width=0), ValueError, "width must be between 1 and 16384 pixels, got 0"),
+    (dict(height=100000), ValueError, "height must be between 1 and 16384 pixels, got 100000"),
+    (dict(width=12.5), TypeError, "width must be an integer, got 12.5"),
+    (dict(mode="xray"), ValueError, "mode must be one of composite, mip, minip, average, isosurface, got 'xray'"),
+    (dict(mode="isosurface"), ValueError, "iso_value is required for mode='isosurface', got None"),
+    (dict(mode="isosurface", iso_value=np.nan), ValueError, "iso_value must be finite, got nan"),
+    (dict(shading=True), NotImplementedError, "shading=True for mode='composite' is not implemented yet"),
+    (dict(shading="on"), TypeError, "shading must be True or False, got 'on'"),
+    (dict(phong=(0.3, 0.7, 0.2)), ValueError, "phong must be four finite non-negative numbers"),
+    (dict(phong=(0.3, 0.7, -0.2, 32)), ValueError, "phong must be four finite non-negative numbers"),
+])
+def test_scene_rejects(kwargs, exc, message):
+    args = dict(volume=VOL, tf=TF, camera=CAM)
+    args.update(kwargs)
+    with pytest.raises(exc, match=message):
+        dvr_gl.Scene(**args)
+
+
+def test_isosurface_scenes_are_always_shaded():
+    s = dvr_gl.Scene(VOL, TF, CAM, mode="isosurface", iso_value=0.5)
+    assert s.shaded and not dvr_gl.Scene(VOL, TF, CAM).shaded
+    assert s.replace(width=8).width == 8 and s.replace(width=8).mode == "isosurface"
+
+
+def test_scene_digest_changes_with_what_defines_the_image():
+    a = dvr_gl.Scene(VOL, TF, CAM, width=8, height=8)
+    assert a.digest() == dvr_gl.Scene(dvr_gl.Volume(DATA.copy()), TF, CAM, width=8, height=8).digest()
+    assert a.digest() != a.replace(width=9).digest()
+    assert a.digest() != a.replace(camera=dvr_gl.Camera((2, 1.5, 11), (2, 1.5, 1))).digest()
+
+
+def test_default_camera_fits_and_rotates():
+    cam = dvr_gl.default_camera(VOL)
+    np.testing.assert_allclose(cam.forward, [0, 0, -1])
+    np.testing.assert_allclose(cam.target, (np.array([4, 3, 2]) / 2))
+    side = dvr_gl.default_camera(VOL, azimuth=90)
+    np.testing.assert_allclose(side.forward, [-1, 0, 0], atol=1e-12)
+    top = dvr_gl.default_camera(VOL, elevation=90)  # looking straight down stays valid
+    np.testing.assert_allclose(top.forward, [0, -1, 0], atol=1e-12)
+    with pytest.raises(ValueError, match="zoom must be positive, got 0"):
+        dvr_gl.default_camera(VOL, zoom=0)
