@@ -1,0 +1,26 @@
+"""Render the bundled CT head with the ray caster and save it as a PNG.
+
+    python apps/render_ct_head.py [out.png]
+
+You should see a translucent skull with a faint skin, seen from the front and below."""
+
+import sys
+
+import dvr_gl
+from dvr_gl import data
+from dvr_gl.io import save_png
+
+
+def render_once(size=256, backend="auto"):
+    """The picture this app shows, as a float image (the headless path tests run)."""
+    head = data.ct_head()
+    scene = dvr_gl.Scene(head, data.ct_head_tf(), dvr_gl.default_camera(head, azimuth=-30, elevation=-75),
+                         width=size, height=size)
+    with dvr_gl.Renderer(backend=backend) as r:
+        return r.render(scene)
+
+
+if __name__ == "__main__":
+    out = sys.argv[1] if len(sys.argv) > 1 else "ct_head.png"
+    save_png(out, render_once(), background=(0, 0, 0))
+    print(f"wrote {out}")

@@ -1,0 +1,35 @@
+#!/usr/bin/env bash
+# Run the whole dvr_gl test suite headless. Installs the system packages the tests need
+# when they are missing (Mesa EGL/llvmpipe, OSMesa, Xvfb; apt-get, as root), then runs
+# pytest; fails if any test fails or if no test ran.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+missing=()
+ldconfig -p | grep -q 'libEGL.so.1 ' || missing+=(libegl1 libegl-mesa0 libgl1-mesa-dri)
+ldconfig -p | grep -q 'libOSMesa.so' || missing+=(libosmesa6)
+command -v Xvfb >/dev/null 2>&1 || missing+=(xvfb)
+if [ ${#missing[@]} -gt 0 ]; then
+    echo "installing system packages: ${missing[*]}"
+    if [ "$(id -u)" -eq 0 ]; then SUDO=""; else SUDO="sudo"; fi
+    $SUDO apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq "${missing[@]}" >/dev/null
+fi
+
+# llvmpipe uses every core unless told otherwise; say what the run used
+export LP_NUM_THREADS="${LP_NUM_THREADS:-$(nproc)}"
+echo "LP_NUM_THREADS=$LP_NUM_THREADS"
+
+log=$(mktemp)
+trap 'rm -f "$log"' EXIT
+set +e
+python -m pytest -q -p no:cacheprovider "$@" 2>&1 | tee "$log"
+status=${PIPESTATUS[0]}
+set -e
+if [ "$status" -ne 0 ]; then
+    exit "$status"
+fi
+if ! grep -Eq '[0-9]+ passed' "$log"; then
+    echo "no test ran" >&2
+    exit 1
+fi
