@@ -168,7 +168,7 @@ def build_parser(bench_module=None):
 
     d = sub.add_parser("demo", help="render the bundled demo scenes to PNGs",
                        description="Render the bundled demo scenes into a folder.")
-    d.add_argument("--out-dir", default=".", metavar="DIR", help="folder for the images (default: .)")
+    d.add_argument("--out-dir", metavar="DIR", help="folder for the images (default: the demo's own, dvr-gl-demo)")
 
     b = sub.add_parser("bench", help="time the techniques", description="Time the techniques.")
     if bench_module is not None:
@@ -184,7 +184,7 @@ def build_parser(bench_module=None):
 
 # ----------------------------------------------------------------------------- commands
 
-def cmd_info(args, out=None, err=None):
+def cmd_info(args, out=None):
     out = out or sys.stdout
     import numpy
     from . import __version__
@@ -203,10 +203,11 @@ def cmd_info(args, out=None, err=None):
     working = 0
     for name in context.BACKENDS:
         try:
-            ctx = context.create_context(name)
+            made = context.create_context(name)
         except Exception as e:  # every failure is a line of the report, not a crash
             print(f"{name}: failed: {_reason(e)}", file=out)
             continue
+        ctx = made[0] if isinstance(made, tuple) else made  # (ctx, backend name)
         try:
             facts = context.describe(ctx)
         except Exception as e:
@@ -221,17 +222,19 @@ def cmd_info(args, out=None, err=None):
                     pass
         working += 1
         print(f"{name}: ok", file=out)
-        for key, value in dict(facts).items():
-            print(f"  {key}: {value}", file=out)
+        facts = dict(facts)
+        width = max((len(str(k)) for k in facts), default=0)
+        for key, value in facts.items():
+            print(f"  {str(key) + ':':<{width + 1}} {value}", file=out)
     if not working:
-        print("no GL backend works: install Mesa's EGL (libegl1, libgl1-mesa-dri) or OSMesa "
-              "(libosmesa6)", file=out)
+        print("no GL backend works (each line above says why and how to fix it)", file=out)
     return 0 if working else 1
 
 
 def _reason(exc):
-    text = str(exc).strip().splitlines()
-    return f"{type(exc).__name__}: {text[0] if text else ''}".rstrip(": ")
+    """``Type: message``, continuation lines indented under the backend's line."""
+    text = str(exc).strip().replace("\n", "\n  ")
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
 
 
 def _load_input(args):
@@ -286,6 +289,15 @@ def _check_out(path):
         raise UsageError("--out", f"{path!r} is a folder")
 
 
+def _check_technique(name):
+    try:
+        from .techniques import names
+    except ImportError:  # no registry: the renderer will judge
+        return
+    if name not in names():
+        raise UsageError("--technique", f"must be one of {', '.join(names())}, got {name!r}")
+
+
 def _describe_tf(name, tf):
     lo, hi = float(tf.knots[0]), float(tf.knots[-1])
     return f"{name} ({lo:g}..{hi:g}, unit distance {tf.unit_distance:g})"
@@ -296,6 +308,7 @@ def cmd_render(args, out=None):
     from .scene import Scene, default_camera
 
     _check_out(args.out)
+    _check_technique(args.technique)
     mode = args.mode or ("isosurface" if args.iso is not None else "composite")
     if mode == "isosurface" and args.iso is None:
         raise UsageError("--iso", "an iso-value is required with --mode isosurface")
@@ -317,7 +330,7 @@ def cmd_render(args, out=None):
     t_load = time.perf_counter() - t0
 
     import dvr_gl
-    renderer_kwargs = {} if args.backend == "auto" else {"backend": args.backend}
+    renderer_kwargs = {"backend": args.backend}
     render_kwargs = {"technique": args.technique}
     if args.step is not None:
         render_kwargs["step"] = args.step
@@ -362,7 +375,8 @@ def cmd_demo(args):
             raise
         print(f"{PROG} demo: the demo is not available yet", file=sys.stderr)
         return 2
-    return int(demo.run_demo(out_dir=args.out_dir) or 0)
+    kwargs = {} if args.out_dir is None else {"out_dir": args.out_dir}
+    return int(demo.run_demo(**kwargs) or 0)
 
 
 def cmd_bench(args, bench_module):

@@ -33,7 +33,6 @@ atomically; :func:`parse_size` and :func:`parse_triplet` parse command-line valu
 
 from __future__ import annotations
 
-import bz2
 import gzip
 import math
 import os
@@ -172,7 +171,7 @@ def load_volume(path, shape=None, dtype=None, spacing=None, origin=None, mask_no
         else:
             data, file_spacing, file_origin = _load_metaimage(path)
         if data.ndim != 3:
-            raise InputError("shape", f"{path!r} holds a {data.ndim}-D array of shape {data.shape}; "
+            raise InputError("path", f"{path!r} holds a {data.ndim}-D array of shape {data.shape}; "
                                       "a volume is 3-D (nz, ny, nx)")
         if shape is not None and tuple(data.shape) != shape:
             raise InputError("shape", f"{path!r} holds shape {tuple(data.shape)} (nz, ny, nx), "
@@ -262,8 +261,11 @@ def _load_npz(path):
             if "data" not in npz.files:
                 raise InputError("data", f"{path!r} has no array named 'data' (it has {sorted(npz.files)})")
             data = npz["data"]
-            spacing = tuple(_triplet(npz["spacing"].tolist(), "spacing", positive=True)) if "spacing" in npz.files else None
-            origin = tuple(_triplet(npz["origin"].tolist(), "origin")) if "origin" in npz.files else None
+            spacing = origin = None
+            if "spacing" in npz.files:
+                spacing = _triplet(npz["spacing"].tolist(), "spacing", positive=True)
+            if "origin" in npz.files:
+                origin = _triplet(npz["origin"].tolist(), "origin")
     except InputError:
         raise
     except (ValueError, OSError, zlib.error) as e:
@@ -313,11 +315,21 @@ def _load_nrrd(path):
         if field not in header:
             raise InputError(field, f"{path!r}: the NRRD header lacks the required field {field!r}")
     dim = int(header["dimension"])
-    sizes = [int(s) for s in header["sizes"]]
-    if dim != 3 or len(sizes) != 3:
+    sizes = [int(s) for s in np.atleast_1d(header["sizes"])]
+    if len(sizes) != dim:
+        raise InputError("sizes", f"{path!r}: dimension is {dim} but sizes has {len(sizes)} values: {sizes}")
+    if dim != 3:
         raise InputError("dimension", f"{path!r} is {dim}-D (sizes {sizes}); a volume is 3-D")
-    if header["type"] == "block":
-        raise InputError("type", f"{path!r}: NRRD type 'block' is not a number")
+    known = getattr(getattr(nrrd, "reader", None), "_TYPEMAP_NRRD2NUMPY", None)
+    if header["type"] == "block" or (known is not None and header["type"] not in known):
+        raise InputError("type", f"{path!r}: unsupported NRRD type {header['type']!r}")
+    if header["encoding"] not in ("raw", "ascii", "text", "txt", "gzip", "gz", "bzip2", "bz2"):
+        raise InputError("encoding", f"{path!r}: unsupported NRRD encoding {header['encoding']!r} "
+                                     "(raw, ascii, gzip and bzip2 are)")
+    if np.dtype(known[header["type"]] if known else "u1").itemsize > 1 and \
+            header["encoding"] not in ("ascii", "text", "txt") and header.get("endian") not in ("little", "big"):
+        raise InputError("endian", f"{path!r}: multi-byte {header['type']!r} needs 'endian: little' or "
+                                   f"'endian: big', got {header.get('endian')!r}")
 
     spec_key = "data file" if "data file" in header else ("datafile" if "datafile" in header else None)
     spec = header.get(spec_key) if spec_key else None
@@ -325,7 +337,7 @@ def _load_nrrd(path):
         if file_list is not None:
             parts = spec.split()
             subdim = _subdim(parts[1:], dim, path, spec)
-            data = _read_nrrd_pieces(header, spec_key, file_list, subdim, sizes, path)
+            data = _read_nrrd_pieces(header, file_list, subdim, sizes, path)
         elif spec is not None and _is_format_spec(spec):
             parts = spec.split()
             fmt, (lo, hi, step) = parts[0], _ints(parts[1:4], path, spec)
@@ -339,16 +351,13 @@ def _load_nrrd(path):
                 names = [fmt % i for i in range(lo, hi + (1 if step > 0 else -1), step)]
             except (TypeError, ValueError) as e:
                 raise InputError("data file", f"{path!r}: bad file name format {fmt!r}: {e}") from None
-            data = _read_nrrd_pieces(header, spec_key, names, subdim, sizes, path)
-        else:
-            if spec is not None:
-                target = spec if os.path.isabs(spec) else os.path.join(os.path.dirname(path), spec)
-                if not os.path.exists(target):
-                    raise MissingFileError("data file", f"{path!r} names the data file {spec!r}, "
-                                                        f"which does not exist ({target!r})")
+            data = _read_nrrd_pieces(header, names, subdim, sizes, path)
+        elif spec is not None:  # one detached data file
+            data = _read_nrrd_pieces(header, [spec], dim, sizes, path)
+        else:  # attached: the data follows the header
             data, _ = nrrd.read(path, index_order="C")
     except nrrd.NRRDError as e:
-        raise InputError("path", f"{path!r}: {e}") from None
+        raise _nrrd_error(e, "sizes", f"{path!r}", f"sizes {sizes} need") from None
     except (OSError, EOFError, zlib.error) as e:
         if isinstance(e, InputError):
             raise
@@ -356,7 +365,8 @@ def _load_nrrd(path):
     except ValueError as e:  # numpy reshape / frombuffer on a short or long file
         if isinstance(e, InputError):
             raise
-        raise InputError("sizes", f"{path!r}: the data does not match sizes {sizes} of {header['type']}: {e}") from None
+        raise InputError("sizes", f"{path!r}: the data does not match sizes {sizes} "
+                                  f"of {header['type']}: {e}") from None
     spacing, origin = _nrrd_geometry(header, path)
     return data, spacing, origin
 
@@ -386,7 +396,7 @@ def _subdim(parts, dim, path, spec):
     return subdim
 
 
-def _read_nrrd_pieces(header, spec_key, names, subdim, sizes, path):
+def _read_nrrd_pieces(header, names, subdim, sizes, path):
     """Read a NRRD whose data is split over several files, each holding a ``subdim``-D
     piece (the fastest ``subdim`` axes; for ``subdim == dim``, equal slabs of the slowest
     axis), through pynrrd's per-file reader (encodings, skips and endianness)."""
@@ -420,9 +430,19 @@ def _read_nrrd_pieces(header, spec_key, names, subdim, sizes, path):
         try:
             chunk = nrrd.read_data(h, filename=path, index_order="C")
         except nrrd.NRRDError as e:
-            raise InputError("data file", f"{path!r}: data file {name!r}: {e}") from None
+            need = "sizes {} need".format(sizes) if len(names) == 1 else \
+                f"sizes {sizes} in {len(names)} files need per file"
+            raise _nrrd_error(e, "data file", f"{path!r}: data file {name!r}", need) from None
         chunks.append(chunk.reshape(-1))
     return np.concatenate(chunks).reshape(tuple(sizes[::-1]))
+
+
+def _nrrd_error(exc, field, where, need):
+    """pynrrd's error as an InputError; its size mismatch ("...: 72-60=12") spelled out."""
+    m = re.search(r"dimensions: (\d+)-(\d+)=", str(exc))
+    if m:
+        return InputError(field, f"{where} holds {m.group(2)} samples, but {need} {m.group(1)}")
+    return InputError(field, f"{where}: {exc}")
 
 
 def _nrrd_geometry(header, path):

@@ -1,0 +1,288 @@
+"""The dvr-gl command line: render writes what the library renders; bad input exits 2
+with a message naming the option, no traceback and no file; info, demo, bench and view
+are wired up."""
+
+import json
+import os
+import subprocess
+import sys
+import types
+
+import numpy as np
+import pytest
+from PIL import Image
+
+import dvr_gl
+from dvr_gl import cli
+from dvr_gl.io import load_volume, to_png_array
+from dvr_gl.transfer import auto_preset
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+@pytest.fixture
+def tiny(tmp_path):
+    """A 6x5x4 float32 ramp with a bright core, as .npy and as raw little-endian."""
+    z, y, x = np.meshgrid(np.arange(4), np.arange(5), np.arange(6), indexing="ij")
+    a = (x + 2 * y + 3 * z).astype(np.float32)
+    a[1:3, 1:4, 2:4] += 20
+    np.save(tmp_path / "tiny.npy", a)
+    a.astype("<f4").tofile(tmp_path / "tiny.raw")
+    return tmp_path, a
+
+
+def _png(path):
+    with Image.open(path) as im:
+        return im.mode, np.array(im)
+
+
+def _run(argv, capsys):
+    code = cli.main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+# ============================================================================ render (GL)
+
+def test_render_npy_writes_what_the_library_renders(renderer, tiny, capsys):
+    d, a = tiny
+    out = d / "tiny.png"
+    code, stdout, err = _run(["render", d / "tiny.npy", "--size", "32x32", "--out", out], capsys)
+    assert code == 0, err
+    mode, px = _png(out)
+    assert mode == "RGBA" and px.shape == (32, 32, 4)
+    assert px[..., 3].max() > 0 and px[0, 0, 3] == 0  # something drawn, corner empty
+    vol = load_volume(d / "tiny.npy")
+    scene = dvr_gl.Scene(vol, auto_preset(vol), dvr_gl.default_camera(vol), 32, 32)
+    assert np.array_equal(px, to_png_array(renderer.render(scene)))
+    assert "32x32" in stdout and "raycast" in stdout and "wrote" in stdout and "first frame" in stdout
+    assert sorted(os.listdir(d)) == ["tiny.npy", "tiny.png", "tiny.raw"]  # no temporary left
+
+
+def test_render_raw_with_options_and_background(renderer, tiny, capsys):
+    d, a = tiny
+    out = d / "raw.png"
+    tf = {"color": [[0, 1, 0, 0], [40, 1, 1, 0]], "opacity": [[0, 0], [40, 0.8]], "unit_distance": 0.5}
+    (d / "tf.json").write_text(json.dumps(tf))
+    argv = ["render", d / "tiny.raw", "--shape", "4,5,6", "--dtype", "float32", "--spacing", "1,1,2",
+            "--tf", d / "tf.json", "--mode", "mip", "--step", "0.25", "--size", "40x24", "--azimuth", "30",
+            "--elevation", "-20", "--zoom", "1.3", "--background", "0,0,1", "--out", out]
+    code, stdout, err = _run(argv, capsys)
+    assert code == 0, err
+    mode, px = _png(out)
+    assert mode == "RGB" and px.shape == (24, 40, 3)
+    vol = dvr_gl.Volume(a, spacing=(1, 1, 2))
+    scene = dvr_gl.Scene(vol, dvr_gl.transfer.load_tf_json(d / "tf.json"),
+                         dvr_gl.default_camera(vol, 30, -20, 1.3), 40, 24, mode="mip")
+    assert np.array_equal(px, to_png_array(renderer.render(scene, step=0.25), background=(0, 0, 1)))
+    assert px[0, 0].tolist() == [0, 0, 255]  # the background where nothing is
+    assert "mip" in stdout and "step 0.25" in stdout
+
+
+def test_render_builtin_isosurface(renderer, tmp_path, capsys):
+    out = tmp_path / "iso.png"
+    code, stdout, err = _run(["render", "builtin:synthetic", "--iso", "0.5", "--size", "32x32",
+                              "--elevation", "30", "--out", out], capsys)
+    assert code == 0, err
+    mode, px = _png(out)
+    assert px[..., 3].max() == 255  # an isosurface is opaque
+    assert "isosurface 0.5" in stdout and "synthetic" in stdout
+
+
+# ============================================================================ bad input
+
+BAD = [
+    (["--size", "32x"], "argument --size", "'32x'"),
+    (["--size", "0x5"], "argument --size", "'0x5'"),
+    (["--background", "2,0,0"], "argument --background", "[0, 1]"),
+    (["--background", "1,1"], "argument --background", "'1,1'"),
+    (["--zoom", "0"], "argument --zoom", "positive"),
+    (["--step", "-1"], "argument --step", "'-1'"),
+    (["--step", "nan"], "argument --step", "finite"),
+    (["--azimuth", "abc"], "argument --azimuth", "'abc'"),
+    (["--mode", "xray"], "argument --mode", "'xray'"),
+    (["--backend", "vulkan"], "argument --backend", "'vulkan'"),
+    (["--shape", "1,2"], "argument --shape", "'1,2'"),
+    (["--spacing", "1,0,1"], "argument --spacing", "positive"),
+    (["--mode", "isosurface"], "--iso", "required"),
+    (["--mode", "mip", "--iso", "3"], "--iso", "only used"),
+    (["--tf", "nope"], "--tf", "'nope'"),
+    (["--tf", "missing.json"], "--tf", "missing.json"),
+    (["--technique", "nope"], "--technique", "'nope'"),
+    (["--dtype", "complex64"], "--dtype", "'complex64'"),
+    (["--shape", "9,9,9"], "--shape", "(9, 9, 9)"),
+    (["--dtype", "int16"], "--dtype", "int16"),
+]
+
+
+@pytest.mark.parametrize("extra, option, fragment", BAD)
+def test_bad_arguments_exit_2_naming_the_option(tiny, capsys, extra, option, fragment):
+    d, _ = tiny
+    out = d / "never.png"
+    code, stdout, err = _run(["render", d / "tiny.npy", "--out", out] + extra, capsys)
+    assert code == 2
+    assert option in err and fragment in err, err
+    assert "Traceback" not in err
+    assert not out.exists()
+
+
+def test_bad_tf_json(tiny, capsys):
+    d, _ = tiny
+    (d / "bad.json").write_text("{not json")
+    (d / "neg.json").write_text(json.dumps({"color": [[0, 0, 0, 0]], "opacity": [[0, 2.0]]}))
+    for name, fragment in (("bad.json", "not valid JSON"), ("neg.json", "[0, 1]")):
+        code, _, err = _run(["render", d / "tiny.npy", "--tf", d / name, "--out", d / "x.png"], capsys)
+        assert code == 2 and "--tf" in err and fragment in err, err
+    assert not (d / "x.png").exists()
+
+
+@pytest.mark.parametrize("make_input, extra, option, fragment", [
+    (lambda d: d / "missing.npy", [], "INPUT", "missing.npy"),
+    (lambda d: d / "tiny.raw", [], "--shape", "missing: shape, dtype, spacing"),
+    (lambda d: d / "tiny.raw", ["--shape", "4,5,6", "--dtype", "float32"], "--spacing", "missing: spacing"),
+    (lambda d: d / "tiny.raw", ["--shape", "4,5,7", "--dtype", "float32", "--spacing", "1,1,1"],
+     "--shape", "480 bytes"),
+    (lambda d: d / "tiny.raw", ["--shape", "4,5,6", "--dtype", "float64", "--spacing", "1,1,1"],
+     "--shape", "float64"),
+    (lambda d: "builtin:nope", [], "INPUT", "builtin:ct_head"),
+    (lambda d: "builtin:ct_head", ["--shape", "1,2,3"], "--shape", "raw files"),
+    (lambda d: d / "nan.npy", [], "--mask-nonfinite", "non-finite"),
+    (lambda d: d / "flat.npy", [], "INPUT", "2-D"),
+])
+def test_bad_input_exit_2(tiny, capsys, make_input, extra, option, fragment):
+    d, a = tiny
+    b = a.copy()
+    b[0, 0, 0] = np.nan
+    np.save(d / "nan.npy", b)
+    np.save(d / "flat.npy", a[0])
+    out = d / "never.png"
+    code, _, err = _run(["render", make_input(d), "--out", out] + extra, capsys)
+    assert code == 2
+    assert option in err and fragment in err, err
+    assert "Traceback" not in err and err.count("\n") == 1  # one line
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("out_name, fragment", [("x.jpg", ".png"), ("nodir/x.png", "does not exist")])
+def test_bad_out(tiny, capsys, out_name, fragment):
+    d, _ = tiny
+    code, _, err = _run(["render", d / "tiny.npy", "--out", d / out_name], capsys)
+    assert code == 2 and "--out" in err and fragment in err
+    assert sorted(os.listdir(d)) == ["tiny.npy", "tiny.raw"]
+
+
+def test_usage_errors(capsys):
+    assert _run([], capsys)[0] == 2
+    code, _, err = _run(["render", "x.npy"], capsys)
+    assert code == 2 and "--out" in err
+    code, _, err = _run(["frobnicate"], capsys)
+    assert code == 2 and "frobnicate" in err
+    code, out, _ = _run(["--help"], capsys)
+    assert code == 0 and "render" in out and "info" in out
+    code, out, _ = _run(["render", "--help"], capsys)
+    assert code == 0 and "--shape" in out and "builtin:ct_head" in out
+    code, out, _ = _run(["--version"], capsys)
+    assert code == 0 and dvr_gl.__version__ in out
+
+
+def test_bad_input_in_a_subprocess_has_no_traceback(tmp_path):
+    env = dict(os.environ, PYTHONPATH=ROOT + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    env.pop("DVR_GL_DEBUG", None)
+    for module in ("dvr_gl.cli", "dvr_gl"):
+        p = subprocess.run([sys.executable, "-m", module, "render", str(tmp_path / "missing.nrrd"),
+                            "--out", str(tmp_path / "x.png")], capture_output=True, text=True, env=env,
+                           timeout=60)
+        assert p.returncode == 2, p.stderr
+        assert p.stderr.startswith("dvr-gl render: error: INPUT: no such file") and "Traceback" not in p.stderr
+        assert p.stdout == "" and os.listdir(tmp_path) == []
+
+
+def test_debug_env_gives_the_traceback(tmp_path, monkeypatch):
+    monkeypatch.setenv("DVR_GL_DEBUG", "1")
+    with pytest.raises(FileNotFoundError):
+        cli.main(["render", str(tmp_path / "missing.npy"), "--out", str(tmp_path / "x.png")])
+
+
+def test_renderer_failure_exits_1(tiny, capsys, monkeypatch):
+    d, _ = tiny
+
+    class NoGL:
+        def __init__(self, backend="auto"):
+            raise RuntimeError("no OpenGL 3.3 core context could be created")
+
+    monkeypatch.setattr(dvr_gl, "Renderer", NoGL, raising=False)
+    code, _, err = _run(["render", d / "tiny.npy", "--out", d / "x.png"], capsys)
+    assert code == 1 and "no OpenGL" in err and "Traceback" not in err
+    assert not (d / "x.png").exists()
+
+
+# ============================================================================ info
+
+def test_info_lists_every_backend(capsys):
+    from dvr_gl.gl.context import BACKENDS
+
+    code, out, _ = _run(["info"], capsys)
+    assert code in (0, 1)
+    assert "dvr_gl" in out and "numpy" in out
+    for name in BACKENDS:
+        assert f"\n{name}: ok" in out or f"\n{name}: failed" in out
+    if code == 0:
+        assert "renderer" in out and "max_3d_texture_size" in out and "version" in out
+
+
+def test_info_reports_failures(capsys, monkeypatch):
+    from dvr_gl.gl import context
+
+    def fail(name):
+        raise context.BackendUnavailable(f"{name} is missing\n  fix: install it")
+
+    monkeypatch.setattr(context, "create_context", fail)
+    code, out, _ = _run(["info"], capsys)
+    assert code == 1
+    assert "egl: failed: BackendUnavailable: egl is missing" in out and "fix: install it" in out
+    assert "osmesa: failed" in out and "no GL backend works" in out
+
+
+# ============================================================================ demo, bench, view
+
+def test_view_not_available(capsys, monkeypatch):
+    monkeypatch.setitem(sys.modules, "dvr_gl.viewer", None)  # import fails as if absent
+    code, _, err = _run(["view", "builtin:ct_head"], capsys)
+    assert code == 2 and "the interactive viewer is not available yet" in err
+
+
+def test_view_passes_its_arguments(capsys, monkeypatch):
+    seen = []
+    fake = types.ModuleType("dvr_gl.viewer")
+    fake.main = lambda args: seen.append(args) or 0
+    monkeypatch.setitem(sys.modules, "dvr_gl.viewer", fake)
+    assert _run(["view", "builtin:ct_head", "--size", "64x64", "--help"], capsys)[0] == 0
+    assert seen == [["builtin:ct_head", "--size", "64x64", "--help"]]
+
+
+def test_demo_is_wired(capsys, monkeypatch, tmp_path):
+    seen = []
+    fake = types.ModuleType("dvr_gl.demo")
+    fake.run_demo = lambda **kw: seen.append(kw) or 0
+    monkeypatch.setitem(sys.modules, "dvr_gl.demo", fake)
+    assert _run(["demo", "--out-dir", tmp_path], capsys)[0] == 0
+    assert _run(["demo"], capsys)[0] == 0
+    assert seen == [{"out_dir": str(tmp_path)}, {}]
+    monkeypatch.setitem(sys.modules, "dvr_gl.demo", None)
+    code, _, err = _run(["demo"], capsys)
+    assert code == 2 and "not available" in err
+
+
+def test_bench_is_wired(capsys, monkeypatch):
+    seen = []
+    fake = types.ModuleType("dvr_gl.bench")
+    fake.add_arguments = lambda parser: parser.add_argument("--quick", action="store_true")
+    fake.run_bench = lambda args: seen.append(args.quick) or 3
+    monkeypatch.setitem(sys.modules, "dvr_gl.bench", fake)
+    assert _run(["bench", "--quick"], capsys)[0] == 3
+    assert seen == [True]
+    code, _, err = _run(["bench", "--slow"], capsys)  # the bench's own parser judges
+    assert code == 2 and "--slow" in err
+    monkeypatch.setitem(sys.modules, "dvr_gl.bench", None)
+    code, _, err = _run(["bench"], capsys)
+    assert code == 2 and "not available" in err

@@ -1,0 +1,655 @@
+"""dvr_gl.io and dvr_gl.data: volume loading (every format, every bad input), PNG writing
+(un-premultiplying, background compositing, rounding, atomic writes), the CLI parsers,
+and the bundled data sets. No GL."""
+
+import gzip
+import os
+import stat
+import zlib
+
+import nrrd
+import numpy as np
+import pytest
+from PIL import Image
+
+import dvr_gl
+from dvr_gl import data
+from dvr_gl.io import (InputError, MissingFileError, load_volume, parse_size, parse_triplet, save_png,
+                       to_png_array)
+
+SHARED = "/work/shared/data"
+HEADSQ = os.path.join(SHARED, "vtk_headsq_quarter")
+LIDC = os.path.join(SHARED, "vtkjs_lidc2_ct")
+HEADMR = os.path.join(SHARED, "vtk_headmr")
+
+
+@pytest.fixture
+def vol_i16():
+    rng = np.random.default_rng(1)
+    return rng.integers(-3000, 3000, size=(5, 4, 3), dtype=np.int16)  # (nz, ny, nx), all different
+
+
+def _err(excinfo):
+    return excinfo.value.field, str(excinfo.value)
+
+
+# ============================================================================ .npy / .npz
+
+def test_npy_round_trip(tmp_path, vol_i16):
+    p = tmp_path / "v.npy"
+    np.save(p, vol_i16)
+    v = load_volume(p)
+    assert v.data.dtype == np.int16 and np.array_equal(v.data, vol_i16)
+    assert v.spacing.tolist() == [1, 1, 1] and v.origin.tolist() == [0, 0, 0]
+    v = load_volume(str(p), spacing=(0.5, 2, 3), origin="1,2,3")
+    assert v.spacing.tolist() == [0.5, 2, 3] and v.origin.tolist() == [1, 2, 3]
+    # shape and dtype are checks for self-describing files
+    assert load_volume(p, shape=(5, 4, 3), dtype="int16").shape == (5, 4, 3)
+
+
+def test_npz_round_trip(tmp_path, vol_i16):
+    p = tmp_path / "v.npz"
+    np.savez_compressed(p, data=vol_i16, spacing=[3.2, 3.2, 1.5], origin=[-1, 0, 1])
+    v = load_volume(p)
+    assert np.array_equal(v.data, vol_i16)
+    assert v.spacing.tolist() == [3.2, 3.2, 1.5] and v.origin.tolist() == [-1, 0, 1]
+
+
+def test_npy_float_and_big_endian_become_native(tmp_path):
+    a = np.linspace(0, 1, 2 * 3 * 4).reshape(2, 3, 4).astype(">f4")
+    p = tmp_path / "be.npy"
+    np.save(p, a)
+    v = load_volume(p)
+    assert v.data.dtype == np.float32 and v.data.dtype.isnative
+    assert np.array_equal(v.data, a.astype(np.float32))
+
+
+@pytest.mark.parametrize("src, expect", [
+    (np.array([-128, 0, 127], np.int8), np.int16),
+    (np.array([0.5, -2, 7], np.float16), np.float32),
+    (np.array([True, False, True]), np.uint8),
+    (np.array([-2 ** 24, 0, 2 ** 24], np.int32), np.float32),
+    (np.array([0, 1, 2 ** 24 + 1], np.uint32), np.float64),
+    (np.array([-(2 ** 53), 0, 2 ** 53], np.int64), np.float64),
+])
+def test_dtypes_are_widened_without_loss(tmp_path, src, expect):
+    a = np.resize(src, (2, 2, 3))
+    p = tmp_path / "w.npy"
+    np.save(p, a)
+    v = load_volume(p)
+    assert v.data.dtype == expect
+    assert np.array_equal(v.data.astype(np.float64), a.astype(np.float64))
+    assert np.array_equal(v.data.astype(a.dtype), a)  # exact: converts back
+
+
+def test_integers_beyond_float64_are_refused(tmp_path):
+    p = tmp_path / "big.npy"
+    np.save(p, np.full((2, 2, 2), 2 ** 53 + 1, np.uint64))
+    with pytest.raises(InputError) as e:
+        load_volume(p)
+    field, msg = _err(e)
+    assert field == "dtype" and "uint64" in msg and str(2 ** 53 + 1) in msg
+
+
+# ============================================================================ raw
+
+def test_raw_round_trip(tmp_path, vol_i16):
+    p = tmp_path / "v.raw"
+    vol_i16.tofile(p)
+    v = load_volume(p, shape="5,4,3", dtype="int16", spacing="1,2,3")
+    assert np.array_equal(v.data, vol_i16) and v.spacing.tolist() == [1, 2, 3]
+    # any extension is raw
+    q = tmp_path / "v.bin"
+    vol_i16.tofile(q)
+    assert np.array_equal(load_volume(q, shape=(5, 4, 3), dtype=np.int16, spacing=(1, 1, 1)).data, vol_i16)
+
+
+def test_raw_big_endian(tmp_path):
+    a = np.arange(2 * 3 * 4, dtype=np.uint16).reshape(2, 3, 4) * 1000
+    p = tmp_path / "be.raw"
+    a.astype(">u2").tofile(p)
+    v = load_volume(p, shape=(2, 3, 4), dtype=">u2", spacing=(1, 1, 1))
+    assert v.data.dtype == np.uint16 and v.data.dtype.isnative and np.array_equal(v.data, a)
+
+
+def test_raw_gz_round_trip(tmp_path):
+    a = np.linspace(-1, 1, 4 * 5 * 6, dtype=np.float32).reshape(4, 5, 6)
+    p = tmp_path / "v.raw.gz"
+    with gzip.open(p, "wb") as f:
+        f.write(a.tobytes())
+    v = load_volume(p, shape=(4, 5, 6), dtype="float32", spacing=(1, 1, 1))
+    assert np.array_equal(v.data, a)
+
+
+@pytest.mark.skipif(not os.path.isdir(LIDC), reason="shared test data not present")
+def test_lidc2_raw_gz_matches_readme_recipe():
+    path = os.path.join(LIDC, "LIDC2_256x256x133_uint8.raw.gz")
+    ref = np.frombuffer(gzip.open(path).read(), np.uint8).reshape(133, 256, 256)
+    v = load_volume(path, shape="133,256,256", dtype="uint8", spacing="1.40625,1.40625,2.5")
+    assert v.data.dtype == np.uint8 and np.array_equal(v.data, ref)
+    assert v.spacing.tolist() == [1.40625, 1.40625, 2.5]
+
+
+@pytest.mark.parametrize("given, missing", [
+    ({}, "shape"),
+    ({"shape": (5, 4, 3)}, "dtype"),
+    ({"shape": (5, 4, 3), "dtype": "int16"}, "spacing"),
+    ({"dtype": "int16", "spacing": (1, 1, 1)}, "shape"),
+])
+def test_raw_needs_shape_dtype_spacing(tmp_path, vol_i16, given, missing):
+    p = tmp_path / "v.raw"
+    vol_i16.tofile(p)
+    with pytest.raises(InputError) as e:
+        load_volume(p, **given)
+    field, msg = _err(e)
+    assert field == missing and f"missing: {missing}" in msg and "v.raw" in msg
+
+
+def test_raw_size_mismatch_names_shape_and_sizes(tmp_path, vol_i16):
+    p = tmp_path / "v.raw"
+    vol_i16.tofile(p)  # 120 bytes
+    with pytest.raises(InputError) as e:
+        load_volume(p, shape=(5, 4, 4), dtype="int16", spacing=(1, 1, 1))
+    field, msg = _err(e)
+    assert field == "shape" and "120 bytes" in msg and "(5, 4, 4)" in msg and "160" in msg
+    with pytest.raises(InputError) as e:
+        load_volume(p, shape=(5, 4, 2), dtype="int16", spacing=(1, 1, 1))
+    assert "40 bytes too many" in str(e.value)
+
+
+@pytest.mark.parametrize("dtype", ["complex64", "U3", "object", "datetime64", "not-a-type", "V4"])
+def test_raw_unsupported_dtype(tmp_path, vol_i16, dtype):
+    p = tmp_path / "v.raw"
+    vol_i16.tofile(p)
+    with pytest.raises(InputError) as e:
+        load_volume(p, shape=(5, 4, 3), dtype=dtype, spacing=(1, 1, 1))
+    field, msg = _err(e)
+    assert field == "dtype" and repr(dtype) in msg and "int16" in msg
+
+
+@pytest.mark.parametrize("kw, field, fragment", [
+    ({"shape": "5,4"}, "shape", "'5,4'"),
+    ({"shape": "5,4,x"}, "shape", "'5,4,x'"),
+    ({"shape": "5,4,3.5"}, "shape", "'5,4,3.5'"),
+    ({"shape": (5, 0, 3)}, "shape", "positive"),
+    ({"shape": (5.0, 4, 3)}, "shape", "integers"),
+    ({"spacing": "1,0,1"}, "spacing", "positive"),
+    ({"spacing": "1,nan,1"}, "spacing", "finite"),
+    ({"spacing": (1, -2, 1)}, "spacing", "positive"),
+    ({"spacing": 3}, "spacing", "3"),
+    ({"origin": "1,2"}, "origin", "'1,2'"),
+    ({"origin": (0, float("inf"), 0)}, "origin", "finite"),
+])
+def test_bad_geometry_arguments(tmp_path, vol_i16, kw, field, fragment):
+    p = tmp_path / "v.raw"
+    vol_i16.tofile(p)
+    args = {"shape": (5, 4, 3), "dtype": "int16", "spacing": (1, 1, 1)}
+    args.update(kw)
+    with pytest.raises(InputError) as e:
+        load_volume(p, **args)
+    got_field, msg = _err(e)
+    assert got_field == field and fragment in msg
+
+
+def test_missing_file(tmp_path):
+    with pytest.raises(MissingFileError) as e:
+        load_volume(tmp_path / "nope.npy")
+    assert isinstance(e.value, FileNotFoundError) and isinstance(e.value, ValueError)
+    assert e.value.field == "path" and "nope.npy" in str(e.value)
+    with pytest.raises(InputError, match="directory"):
+        load_volume(tmp_path)
+
+
+def test_self_describing_files_check_shape_and_dtype(tmp_path, vol_i16):
+    p = tmp_path / "v.npy"
+    np.save(p, vol_i16)
+    with pytest.raises(InputError) as e:
+        load_volume(p, shape=(3, 4, 5))
+    assert e.value.field == "shape" and "(5, 4, 3)" in str(e.value) and "(3, 4, 5)" in str(e.value)
+    with pytest.raises(InputError) as e:
+        load_volume(p, dtype="uint8")
+    assert e.value.field == "dtype" and "int16" in str(e.value) and "uint8" in str(e.value)
+
+
+def test_npy_not_3d(tmp_path):
+    p = tmp_path / "v.npy"
+    np.save(p, np.zeros((4, 4)))
+    with pytest.raises(InputError) as e:
+        load_volume(p)
+    assert e.value.field == "path" and "2-D" in str(e.value)
+
+
+def test_npy_pickled_or_garbage(tmp_path):
+    p = tmp_path / "obj.npy"
+    np.save(p, np.array([{"a": 1}], dtype=object), allow_pickle=True)
+    with pytest.raises(InputError) as e:
+        load_volume(p)
+    assert e.value.field == "path"
+    q = tmp_path / "junk.npy"
+    q.write_bytes(b"not numpy at all")
+    with pytest.raises(InputError):
+        load_volume(q)
+
+
+def test_npz_without_data(tmp_path):
+    p = tmp_path / "v.npz"
+    np.savez(p, volume=np.zeros((2, 2, 2)))
+    with pytest.raises(InputError) as e:
+        load_volume(p)
+    assert e.value.field == "data" and "'volume'" in str(e.value)
+
+
+def test_nonfinite_needs_masking(tmp_path):
+    a = np.ones((3, 3, 3), np.float32)
+    a[1, 1, 1] = np.nan
+    p = tmp_path / "nan.npy"
+    np.save(p, a)
+    with pytest.raises(ValueError, match="mask_nonfinite"):
+        load_volume(p)
+    v = load_volume(p, mask_nonfinite=True)
+    assert v.has_nonfinite
+
+
+# ============================================================================ NRRD
+
+@pytest.mark.parametrize("encoding", ["raw", "gzip", "bzip2", "ascii"])
+@pytest.mark.parametrize("detached", [False, True])
+def test_nrrd_round_trip_pynrrd(tmp_path, vol_i16, encoding, detached):
+    p = tmp_path / ("v.nhdr" if detached else "v.nrrd")
+    nrrd.write(str(p), vol_i16, {"encoding": encoding, "spacings": [0.5, 0.75, 2.0]},
+               detached_header=detached, index_order="C")
+    v = load_volume(p)
+    assert v.data.dtype == np.int16 and np.array_equal(v.data, vol_i16)
+    assert v.spacing.tolist() == [0.5, 0.75, 2.0]
+
+
+def test_nrrd_space_directions_and_origin(tmp_path):
+    a = np.arange(2 * 3 * 4, dtype=np.float32).reshape(2, 3, 4)
+    p = tmp_path / "v.nrrd"
+    header = {"space": "left-posterior-superior", "space directions": np.diag([0.5, 0.25, 3.0]),
+              "space origin": np.array([10.0, -20.0, 5.0])}
+    nrrd.write(str(p), a, header, index_order="C")
+    v = load_volume(p)
+    assert np.array_equal(v.data, a)
+    assert v.spacing.tolist() == [0.5, 0.25, 3.0] and v.origin.tolist() == [10.0, -20.0, 5.0]
+    # spacing and origin given replace the file's
+    v = load_volume(p, spacing=(1, 1, 1), origin=(0, 0, 0))
+    assert v.spacing.tolist() == [1, 1, 1] and v.origin.tolist() == [0, 0, 0]
+
+
+def test_nrrd_rotated_directions_warn_and_use_lengths(tmp_path):
+    a = np.zeros((2, 2, 2), np.uint8)
+    c, s = np.cos(0.3), np.sin(0.3)
+    d = np.array([[2 * c, 2 * s, 0], [-3 * s, 3 * c, 0], [0, 0, -4.0]])
+    p = tmp_path / "rot.nrrd"
+    nrrd.write(str(p), a, {"space": "right-anterior-superior", "space directions": d}, index_order="C")
+    with pytest.warns(UserWarning, match="space directions"):
+        v = load_volume(p)
+    assert np.allclose(v.spacing, [2, 3, 4])
+
+
+@pytest.mark.skipif(not os.path.isdir(HEADSQ), reason="shared test data not present")
+def test_headsq_detached_multifile_nhdr_matches_readme_recipe():
+    ref = np.stack([np.fromfile(os.path.join(HEADSQ, f"quarter.{i}"), dtype="<i2").reshape(64, 64)
+                    for i in range(1, 94)])
+    v = load_volume(os.path.join(HEADSQ, "quarter.nhdr"))
+    assert v.shape == (93, 64, 64) and v.data.dtype == np.int16
+    assert np.array_equal(v.data, ref)
+    assert v.spacing.tolist() == [3.2, 3.2, 1.5] and v.origin.tolist() == [0, 0, 0]
+    assert v.data_range == (0.0, 3926.0)
+
+
+def _slices(tmp_path, a, names, encoding="raw"):
+    for name, sl in zip(names, a):
+        raw = sl.astype("<u2").tobytes()
+        if encoding == "gzip":
+            raw = gzip.compress(raw)
+        (tmp_path / name).write_bytes(raw)
+
+
+def _nhdr(tmp_path, data_file, sizes="4 3 5", encoding="raw", extra=""):
+    p = tmp_path / "h.nhdr"
+    p.write_text(f"NRRD0004\n# a comment\ndimension: 3\nsizes: {sizes}\ntype: ushort\nendian: little\n"
+                 f"encoding: {encoding}\nspacings: 1 2 3\n{extra}data file: {data_file}\n")
+    return p
+
+
+@pytest.fixture
+def vol_u16():
+    return (np.arange(5 * 3 * 4, dtype=np.uint16) * 7).reshape(5, 3, 4)
+
+
+@pytest.mark.parametrize("encoding", ["raw", "gzip"])
+def test_nrrd_format_form(tmp_path, vol_u16, encoding):
+    _slices(tmp_path, vol_u16, [f"s{i:03d}.raw" for i in range(1, 6)], encoding)
+    v = load_volume(_nhdr(tmp_path, "s%03d.raw 1 5 1", encoding=encoding))
+    assert np.array_equal(v.data, vol_u16) and v.spacing.tolist() == [1, 2, 3]
+
+
+def test_nrrd_format_form_negative_step_and_subdim(tmp_path, vol_u16):
+    # files numbered downwards: slice 0 is in f10, slice 4 in f2
+    _slices(tmp_path, vol_u16, [f"f{i}" for i in range(10, 1, -2)])
+    assert np.array_equal(load_volume(_nhdr(tmp_path, "f%d 10 2 -2")).data, vol_u16)
+    # subdim 3: one file holding the whole volume; subdim 1: one file per row
+    (tmp_path / "all0").write_bytes(vol_u16.astype("<u2").tobytes())
+    assert np.array_equal(load_volume(_nhdr(tmp_path, "all%d 0 0 1 3")).data, vol_u16)
+    for k, row in enumerate(vol_u16.reshape(15, 4)):
+        (tmp_path / f"row{k}").write_bytes(row.astype("<u2").tobytes())
+    assert np.array_equal(load_volume(_nhdr(tmp_path, "row%d 0 14 1 1")).data, vol_u16)
+
+
+def test_nrrd_list_form(tmp_path, vol_u16):
+    names = ["a.raw", "b.raw", "c.raw", "d.raw", "e.raw"]
+    _slices(tmp_path, vol_u16, names)
+    p = _nhdr(tmp_path, "LIST")
+    with open(p, "a") as f:
+        f.write("\n".join(names) + "\n")
+    assert np.array_equal(load_volume(p).data, vol_u16)
+    # LIST 3: slabs of the slowest axis (here 5 slabs of one slice, then one slab of five)
+    p.write_text(p.read_text().replace("data file: LIST", "data file: LIST 3"))
+    assert np.array_equal(load_volume(p).data, vol_u16)
+    (tmp_path / "whole.raw").write_bytes(vol_u16.astype("<u2").tobytes())
+    q = _nhdr(tmp_path, "LIST 3")
+    with open(q, "a") as f:
+        f.write("whole.raw\n")
+    assert np.array_equal(load_volume(q).data, vol_u16)
+
+
+def test_nrrd_line_and_byte_skip_apply_to_each_file(tmp_path, vol_u16):
+    for i, sl in enumerate(vol_u16):
+        (tmp_path / f"k{i}").write_bytes(b"junk line\n" + b"\x00" * 6 + sl.astype("<u2").tobytes())
+    p = _nhdr(tmp_path, "k%d 0 4 1", extra="line skip: 1\nbyte skip: 6\n")
+    assert np.array_equal(load_volume(p).data, vol_u16)
+
+
+def test_nrrd_missing_data_file_is_named(tmp_path, vol_u16):
+    _slices(tmp_path, vol_u16[:4], [f"s{i}" for i in range(4)])
+    with pytest.raises(MissingFileError) as e:
+        load_volume(_nhdr(tmp_path, "s%d 0 4 1"))
+    assert e.value.field == "data file" and "'s4'" in str(e.value)
+    with pytest.raises(MissingFileError) as e:
+        load_volume(_nhdr(tmp_path, "single.raw"))
+    assert e.value.field == "data file" and "single.raw" in str(e.value)
+
+
+def test_nrrd_wrong_file_count(tmp_path, vol_u16):
+    _slices(tmp_path, vol_u16, [f"s{i}" for i in range(5)])
+    with pytest.raises(InputError) as e:
+        load_volume(_nhdr(tmp_path, "s%d 0 3 1"))
+    assert e.value.field == "data file" and "4 data files" in str(e.value) and "need 5" in str(e.value)
+    with pytest.raises(InputError) as e:
+        load_volume(_nhdr(tmp_path, "s%d 0 1 1 3"))  # 2 slabs cannot split 5 slices
+    assert e.value.field == "data file"
+    with pytest.raises(InputError) as e:
+        load_volume(_nhdr(tmp_path, "s%d 0 4 0"))
+    assert "step" in str(e.value)
+    with pytest.raises(InputError) as e:
+        load_volume(_nhdr(tmp_path, "s%d 4 0 1"))
+    assert "not reached" in str(e.value)
+    with pytest.raises(InputError) as e:
+        load_volume(_nhdr(tmp_path, "s%d 0 4 1 7"))
+    assert "outside [1, 3]" in str(e.value)
+
+
+def test_nrrd_short_piece(tmp_path, vol_u16):
+    _slices(tmp_path, vol_u16, [f"s{i}" for i in range(5)])
+    (tmp_path / "s2").write_bytes(b"\x00" * 10)
+    with pytest.raises(InputError) as e:
+        load_volume(_nhdr(tmp_path, "s%d 0 4 1"))
+    assert e.value.field == "data file" and "'s2'" in str(e.value)
+
+
+def test_nrrd_bad_headers(tmp_path, vol_u16):
+    (tmp_path / "d.raw").write_bytes(vol_u16.astype("<u2").tobytes())
+    with pytest.raises(InputError) as e:
+        load_volume(_nhdr(tmp_path, "d.raw", sizes="60"))
+    assert e.value.field == "sizes" and "[60]" in str(e.value)
+    p = _nhdr(tmp_path, "d.raw")
+    p.write_text(p.read_text().replace("dimension: 3", "dimension: 2").replace("sizes: 4 3 5", "sizes: 12 5"))
+    with pytest.raises(InputError) as e:
+        load_volume(p)
+    assert e.value.field == "dimension" and "2-D" in str(e.value)
+    p = _nhdr(tmp_path, "d.raw", extra="")
+    p.write_text(p.read_text().replace("spacings: 1 2 3", "spacings: 1 0 3"))
+    with pytest.raises(InputError) as e:
+        load_volume(p)
+    assert e.value.field == "spacings" and "0" in str(e.value)
+    p.write_text(p.read_text().replace("type: ushort\n", ""))
+    with pytest.raises(InputError) as e:
+        load_volume(p)
+    assert e.value.field == "type"
+    p.write_text("not a nrrd\n")
+    with pytest.raises(InputError) as e:
+        load_volume(p)
+    assert e.value.field == "path" and "NRRD" in str(e.value)
+    p = _nhdr(tmp_path, "d.raw", sizes="4 3 6")  # the file is one slice short
+    with pytest.raises(InputError) as e:
+        load_volume(p)
+    assert "holds 60 samples" in str(e.value) and "need 72" in str(e.value)
+    for old, new, field in (("type: ushort", "type: complex", "type"), ("encoding: raw", "encoding: zip", "encoding"),
+                            ("endian: little\n", "", "endian")):
+        p = _nhdr(tmp_path, "d.raw")
+        p.write_text(p.read_text().replace(old, new))
+        with pytest.raises(InputError) as e:
+            load_volume(p)
+        assert e.value.field == field and (new.split(": ")[-1] if new else "None") in str(e.value)
+
+
+# ============================================================================ MetaImage
+
+def test_metaimage_detached_local_and_compressed(tmp_path, vol_i16):
+    (tmp_path / "v.raw").write_bytes(vol_i16.astype(">i2").tobytes())
+    p = tmp_path / "v.mhd"
+    p.write_text("ObjectType = Image\nNDims = 3\nDimSize = 3 4 5\nElementType = MET_SHORT\n"
+                 "ElementSpacing = 1 2 3\nOffset = 4 5 6\nElementByteOrderMSB = True\n"
+                 "ElementDataFile = v.raw\n")
+    v = load_volume(p)
+    assert np.array_equal(v.data, vol_i16) and v.spacing.tolist() == [1, 2, 3] and v.origin.tolist() == [4, 5, 6]
+    q = tmp_path / "v.mha"
+    q.write_bytes(b"NDims = 3\nDimSize = 3 4 5\nElementType = MET_SHORT\nCompressedData = True\n"
+                  b"ElementDataFile = LOCAL\n" + zlib.compress(vol_i16.astype("<i2").tobytes()))
+    assert np.array_equal(load_volume(q).data, vol_i16)
+    p.write_text(p.read_text().replace("v.raw", "gone.raw"))
+    with pytest.raises(MissingFileError) as e:
+        load_volume(p)
+    assert e.value.field == "ElementDataFile" and "gone.raw" in str(e.value)
+
+
+@pytest.mark.skipif(not os.path.isdir(HEADMR), reason="shared test data not present")
+def test_metaimage_headmr_matches_readme_recipe():
+    ref = np.fromfile(os.path.join(HEADMR, "HeadMRVolume.raw"), dtype=np.uint8).reshape(42, 62, 48)
+    v = load_volume(os.path.join(HEADMR, "HeadMRVolume.mhd"))
+    assert np.array_equal(v.data, ref) and v.spacing.tolist() == [4, 4, 4]
+
+
+# ============================================================================ PNG
+
+def _png(path):
+    with Image.open(path) as im:
+        return im.mode, np.array(im)
+
+
+def test_png_unpremultiplies(tmp_path):
+    img = np.zeros((2, 3, 4), np.float32)
+    img[0, 0] = (0.25, 0.1, 0.0, 0.5)   # straight colour (0.5, 0.2, 0), alpha 0.5
+    img[0, 1] = (1.0, 1.0, 1.0, 1.0)
+    img[0, 2] = (0.3, 0.2, 0.1, 0.0)    # alpha 0: colour written as 0
+    img[1, 0] = (0.001, 0.0, 0.0, 0.001)  # tiny alpha: rounds to 0, so colour 0 too
+    img[1, 1] = (0.2, 0.0, 0.0, 0.1)    # colour above alpha (unclamped specular): clipped to 1
+    img[1, 2] = (0.5, 0.5, 0.5, 1.5)    # out of range alpha clipped to 1
+    p = tmp_path / "a.png"
+    assert save_png(p, img) == os.fspath(p)
+    mode, px = _png(p)
+    assert mode == "RGBA" and px.shape == (2, 3, 4) and px.dtype == np.uint8
+    assert px[0, 0].tolist() == [128, 51, 0, 128]
+    assert px[0, 1].tolist() == [255, 255, 255, 255]
+    assert px[0, 2].tolist() == [0, 0, 0, 0]
+    assert px[1, 0].tolist() == [0, 0, 0, 0]
+    assert px[1, 1].tolist() == [255, 0, 0, 26]
+    assert px[1, 2].tolist() == [128, 128, 128, 255]
+    assert np.array_equal(px, to_png_array(img))
+
+
+def test_png_background_composite(tmp_path):
+    rng = np.random.default_rng(2)
+    a = rng.random((4, 5, 1))
+    straight = rng.random((4, 5, 3))
+    img = np.concatenate([straight * a, a], axis=-1).astype(np.float32)
+    bg = (0.2, 0.4, 1.0)
+    p = tmp_path / "b.png"
+    save_png(p, img, background=bg)
+    mode, px = _png(p)
+    assert mode == "RGB" and px.shape == (4, 5, 3)
+    expect = np.rint(np.clip(img[..., :3] + (1 - img[..., 3:]) * np.array(bg), 0, 1) * 255)
+    assert np.array_equal(px, expect)
+    # transparent over the background is the background; opaque ignores it
+    clear = np.zeros((1, 2, 4), np.float32)
+    clear[0, 1] = (0.1, 0.2, 0.3, 1.0)
+    assert to_png_array(clear, background=(1, 0.5, 0)).tolist() == [[[255, 128, 0], [26, 51, 77]]]
+
+
+def test_png_rounds_to_nearest():
+    levels = np.array([0, 0.5, 1.49, 1.51, 254.49, 254.51, 255]) / 255
+    img = np.zeros((1, len(levels), 4))
+    img[..., 0] = levels
+    img[..., 3] = 1
+    assert to_png_array(img)[0, :, 0].tolist() == [0, 0, 1, 2, 254, 255, 255]  # rint: 0.5 -> 0 (half to even)
+
+
+@pytest.mark.parametrize("image, fragment", [
+    (np.zeros((4, 4, 3), np.float32), "(H, W, 4)"),
+    (np.zeros((4, 4), np.float32), "(H, W, 4)"),
+    (np.zeros((0, 4, 4), np.float32), "(H, W, 4)"),
+    (np.zeros((4, 4, 4), np.uint8), "dtype uint8"),
+    ([[[0, 0, 0, 0]]], "numpy array"),
+    (np.full((2, 2, 4), np.nan, np.float32), "non-finite"),
+])
+def test_png_bad_image(tmp_path, image, fragment):
+    p = tmp_path / "bad.png"
+    with pytest.raises(InputError) as e:
+        save_png(p, image)
+    assert e.value.field == "image" and fragment in str(e.value)
+    assert os.listdir(tmp_path) == []
+
+
+@pytest.mark.parametrize("bg, fragment", [((2, 0, 0), "[0, 1]"), ((0, 0), "three"), ("1,1", "'1,1'")])
+def test_png_bad_background(tmp_path, bg, fragment):
+    with pytest.raises(InputError) as e:
+        save_png(tmp_path / "x.png", np.zeros((1, 1, 4), np.float32), background=bg)
+    assert e.value.field == "background" and fragment in str(e.value)
+    assert os.listdir(tmp_path) == []
+
+
+def test_png_missing_directory(tmp_path):
+    with pytest.raises(MissingFileError) as e:
+        save_png(tmp_path / "no" / "x.png", np.zeros((1, 1, 4), np.float32))
+    assert e.value.field == "path"
+
+
+def test_png_atomic_on_failure(tmp_path, monkeypatch):
+    target = tmp_path / "img.png"
+    target.write_bytes(b"old contents")
+
+    def failing_save(self, fp, *args, **kwargs):
+        fp.write(b"\x89PNG half written")
+        raise OSError("disk full")
+
+    monkeypatch.setattr(Image.Image, "save", failing_save)
+    with pytest.raises(OSError, match="disk full"):
+        save_png(target, np.zeros((2, 2, 4), np.float32))
+    assert sorted(os.listdir(tmp_path)) == ["img.png"]  # no temporary left behind
+    assert target.read_bytes() == b"old contents"     # the old file untouched
+    new = tmp_path / "new.png"
+    with pytest.raises(OSError):
+        save_png(new, np.zeros((2, 2, 4), np.float32))
+    assert sorted(os.listdir(tmp_path)) == ["img.png"]
+
+
+def test_png_replaces_and_has_normal_permissions(tmp_path):
+    target = tmp_path / "img.png"
+    target.write_bytes(b"old")
+    save_png(target, np.ones((3, 2, 4), np.float32))
+    assert _png(target)[1].shape == (3, 2, 4)
+    assert os.listdir(tmp_path) == ["img.png"]
+    umask = os.umask(0)
+    os.umask(umask)
+    assert stat.S_IMODE(os.stat(target).st_mode) == 0o666 & ~umask
+
+
+# ============================================================================ parsers
+
+def test_parse_size():
+    assert parse_size("512x256") == (512, 256)
+    assert parse_size(" 64X32 ") == (64, 32)
+    assert parse_size("128") == (128, 128)
+    for bad in ["", "x", "5x", "x5", "-5x5", "5x5x5", "5.5x5", "0x5", "5x99999", "axb"]:
+        with pytest.raises(InputError) as e:
+            parse_size(bad)
+        assert e.value.field == "size" and repr(bad) in str(e.value)
+
+
+def test_parse_triplet():
+    assert parse_triplet("1,2,3") == (1.0, 2.0, 3.0)
+    assert parse_triplet(" 1.5 , -2, 3e2") == (1.5, -2.0, 300.0)
+    assert parse_triplet("64,64,93", "shape", kind=int) == (64, 64, 93)
+    assert parse_triplet((1, 2, 3)) == (1.0, 2.0, 3.0)
+    for bad in ["1,2", "1,2,3,4", "1,,3", "a,b,c", "1;2;3", "1,2,inf"]:
+        with pytest.raises(InputError) as e:
+            parse_triplet(bad, "spacing")
+        assert e.value.field == "spacing" and repr(bad) in str(e.value)
+    with pytest.raises(InputError, match="positive"):
+        parse_triplet("1,0,1", "spacing", positive=True)
+    with pytest.raises(InputError, match="integers"):
+        parse_triplet("1,2,3.5", "shape", kind=int)
+
+
+# ============================================================================ bundled data
+
+def test_ct_head():
+    v = data.ct_head()
+    assert isinstance(v, dvr_gl.Volume) and v is data.ct_head()  # cached, immutable
+    assert v.shape == (93, 64, 64) and v.data.dtype == np.int16 and v.data.dtype.isnative
+    assert v.spacing.tolist() == [3.2, 3.2, 1.5] and v.origin.tolist() == [0, 0, 0]
+    assert v.data_range == (0.0, 3926.0)
+    assert not v.data.flags.writeable
+    if os.path.isdir(HEADSQ):
+        ref = np.stack([np.fromfile(os.path.join(HEADSQ, f"quarter.{i}"), dtype="<i2").reshape(64, 64)
+                        for i in range(1, 94)])
+        assert np.array_equal(v.data, ref)
+
+
+def test_ct_head_licence_is_shipped():
+    here = os.path.dirname(data.__file__)
+    text = open(os.path.join(here, "LICENSE-headsq.txt")).read()
+    assert "Copyright (c) 1993-2008 Ken Martin, Will Schroeder, Bill Lorensen" in text
+    assert "pyvista/vtk-data" in text and "126ee906165a8b2f984f08259a4a2d32cf3b3409" in text
+    assert "Neither name of Ken Martin, Will Schroeder, or Bill Lorensen" in text
+
+
+def test_synthetic_samples_the_analytic_field():
+    v = data.synthetic()
+    assert v.shape == (64, 64, 64) and v.data.dtype == np.float32
+    assert v.spacing.tolist() == [1, 1, 1] and v.origin.tolist() == [0, 0, 0]
+    k, j, i = 10, 40, 33
+    assert v.data[k, j, i] == np.float32(data.synthetic_field(i, j, k))
+    c = data.SYNTHETIC_EXTENT / 2
+    assert abs(data.synthetic_field(c, c, c) - 0.6) < 1e-3  # the centre blob's peak
+    assert 0.99 < v.data_range[1] < 1.01
+    faces = [v.data[0], v.data[-1], v.data[:, 0], v.data[:, -1], v.data[..., 0], v.data[..., -1]]
+    assert max(float(f.max()) for f in faces) < 1e-3
+    w = data.synthetic(33)  # same world box, coarser grid, same field
+    assert w.shape == (33, 33, 33) and np.allclose(w.extent, v.extent)
+    assert w.data[16, 16, 16] == np.float32(data.synthetic_field(c, c, c))
+    with pytest.raises(ValueError, match="n must be"):
+        data.synthetic(1)
+    with pytest.raises(TypeError, match="n must be"):
+        data.synthetic(64.0)
+
+
+def test_default_transfer_functions():
+    head_tf, field_tf = data.ct_head_tf(), data.synthetic_tf()
+    assert isinstance(head_tf, dvr_gl.TransferFunction) and isinstance(field_tf, dvr_gl.TransferFunction)
+    assert head_tf.unit_distance == data.ct_head().min_spacing == 1.5
+    assert field_tf.unit_distance == data.synthetic().min_spacing == 1.0
+    assert head_tf.opacity(0.0) == 0 and head_tf.opacity(1000.0) == 0 and head_tf.opacity(2000.0) > 0.1
+    assert field_tf.opacity(0.05) == 0 and field_tf.opacity(1.0) > 0.5
