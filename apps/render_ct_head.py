@@ -2,7 +2,7 @@
 
     python apps/render_ct_head.py [out.png]
 
-You should see a translucent skull with a faint skin, seen from the front and below."""
+You should see a translucent skull with a faint skin, seen from the front."""
 
 import sys
 
@@ -14,7 +14,7 @@ from dvr_gl.io import save_png
 def render_once(size=256, backend="auto"):
     """The picture this app shows, as a float image (the headless path tests run)."""
     head = data.ct_head()
-    scene = dvr_gl.Scene(head, data.ct_head_tf(), dvr_gl.default_camera(head, azimuth=-30, elevation=-75),
+    scene = dvr_gl.Scene(head, data.ct_head_tf(), dvr_gl.default_camera(head, azimuth=0, elevation=90),
                          width=size, height=size)
     with dvr_gl.Renderer(backend=backend) as r:
         return r.render(scene)

@@ -20,7 +20,7 @@ TILE = 192  # pixels; small enough that the exact images take seconds, not minut
 def demo_scenes(size=TILE):
     """(title, scene) pairs: the bundled CT head in three modes and the synthetic field."""
     head, field = data.ct_head(), data.synthetic()
-    head_cam = default_camera(head, azimuth=-30, elevation=-75, zoom=1.15)
+    head_cam = default_camera(head, azimuth=0, elevation=90, zoom=1.15)  # face on, upright
     field_cam = default_camera(field, azimuth=25, elevation=20, zoom=1.2)
     return [
         ("CT head, composite", Scene(head, data.ct_head_tf(), head_cam, size, size)),

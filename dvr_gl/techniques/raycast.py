@@ -30,9 +30,10 @@ ert_transmittance : early ray termination once the transmittance falls below thi
     is below ``ert_transmittance`` in every channel of the pixel.
 skip_empty : empty-space skipping (composite mode only). The volume is cut into bricks
     of ``BRICK`` cells; each brick's value range (with a one-sample margin, so rounding in
-    the texture unit cannot leave it) is classified once per transfer function; segments
-    whose midpoint lies in a brick whose range has zero opacity everywhere contribute
-    exactly nothing and are jumped over. The image is identical with it on and off.
+    the texture unit cannot leave it) is classified once per transfer function. A sample
+    that comes out fully transparent looks up its brick; if the brick's whole range has
+    zero opacity, every midpoint in it contributes exactly nothing and the ray jumps to
+    the brick's exit. The image is identical with it on and off.
 """
 
 from __future__ import annotations
@@ -158,11 +159,22 @@ def brick_value_ranges(volume):
 
 
 def brick_occupancy(ranges, lut):
-    """True for bricks in which some value has non-zero opacity. The range is widened by
-    one table entry so the shader's float32 lookup cannot reach an entry left out here."""
+    """True for bricks in which some value has non-zero opacity.
+
+    The shader's float32 arithmetic can move a value and its table index by a few units
+    in the last place, never more: trilinear weights are convex, so an interpolated value
+    stays within its corners' range up to rounding relative to their magnitude. The
+    range is widened by that much, relative, so a brick of constant air (often exactly
+    the TF's first control point) still counts as empty."""
     lo, hi = ranges
-    pad = 1.0 / lut.scale
-    return lut.max_opacity_between(lo - pad, hi + pad) > 0
+    rel = 64 * 2.0 ** -24
+    smin = lo - rel * np.abs(lo)
+    smax = hi + rel * np.abs(hi)
+    u0 = (smin - lut.lo) * lut.scale
+    u1 = (smax - lut.lo) * lut.scale
+    u0 -= rel * np.abs(u0)
+    u1 += rel * np.abs(u1)
+    return lut.max_opacity_between(lut.lo + u0 / lut.scale, lut.lo + u1 / lut.scale) > 0
 
 
 # ---------------------------------------------------------------------------------------

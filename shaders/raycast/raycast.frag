@@ -122,27 +122,29 @@ void main() {
 #if MASK_NONFINITE
         if (!insideValidCell(p)) continue;
 #endif
-#if SKIP_EMPTY
-        {
+        float s = sampleVolume(p);
+#if MODE_COMPOSITE
+        vec4 rgba = applyTF(s);
+        if (rgba.a <= 0.0) {
+            // Nothing to composite. Only now look at the brick: occupied regions never
+            // pay for the lookup, and an empty brick is crossed in one jump.
+  #if SKIP_EMPTY
             vec3 idx = p / u_spacing;
             ivec3 brick = clamp(ivec3(floor(idx / u_brick)), ivec3(0), textureSize(t_occupancy, 0) - 1);
             if (texelFetch(t_occupancy, brick, 0).r < 0.5) {
-                // Leave the brick: every midpoint inside it has zero opacity. Jump to the
-                // segment before the one whose midpoint first passes the brick's exit, so
-                // rounding can only make us look once more, never skip a sample.
+                // Every midpoint inside this brick has zero opacity. Jump to the segment
+                // before the one whose midpoint first passes the brick's exit, so rounding
+                // can only make us look once more, never skip a sample.
                 vec3 lo = vec3(brick) * u_brick * u_spacing;
                 vec3 hi = lo + u_brick * u_spacing;
                 vec3 t_far = max((lo - origin) / dir, (hi - origin) / dir);
                 float t_exit = min(min(t_far.x, t_far.y), t_far.z);
                 int k_next = int(ceil((t_exit - t0) / u_step - jitter - 0.5)) - 1;
                 k = max(k, k_next - 1);
-                continue;
             }
+  #endif
+            continue;
         }
-#endif
-        float s = sampleVolume(p);
-#if MODE_COMPOSITE
-        vec4 rgba = applyTF(s);
         float transparency = rgba.a > 0.5 ? transparencyTF(s) : 1.0 - rgba.a;
         float alpha = correctOpacity(rgba.a, transparency, len * u_inv_unit);
         compositeFrontToBack(color, alpha_acc, rgba.rgb, alpha);
