@@ -8,7 +8,9 @@ For each data set (the vtk.js LIDC2 chest CT and the bundled CT head) and each s
 - VTK's GPU ray caster (``dvr_gl.vtk_peer``; skipped when VTK is not installed),
 
 and reports the median steady-state frame time (after one warm-up frame; every frame
-ends with the image read back, so the GL has finished) and the error against the exact
+ends with the image read back, so the GL has finished; the renderers' frames are taken
+round robin, so a change in the machine's load falls on all three alike; ``min ms`` is
+the fastest frame) and the error against the exact
 image of the contract (``dvr_gl.reference.exact``, cached on disk): RMSE, largest
 absolute error and PSNR over premultiplied RGBA. The ratio columns divide each row by
 VTK's row at the same data set and step: ``t/VTK`` < 1 is faster than VTK,
@@ -24,6 +26,7 @@ from __future__ import annotations
 import argparse
 import csv
 import datetime
+import functools
 import gzip
 import io
 import json
@@ -145,11 +148,16 @@ class Progress:
             self.stream.flush()
 
     def advance(self, label=""):
+        """One more done. Off a terminal, a line is written only when the label's part
+        before its colon changes, and at the end."""
         self.done += 1
         if self.tty:
             self.stream.write("\r\033[K" + self._line(label))
         else:
-            self.stream.write(self._line(label) + "\n")
+            group = label.split(":")[0]
+            if group != getattr(self, "_group", None) or self.done == self.total:
+                self._group = group
+                self.stream.write(self._line(label) + "\n")
         self.stream.flush()
 
     def close(self):
@@ -159,18 +167,26 @@ class Progress:
 
 
 # -- measuring -----------------------------------------------------------------------------
-def time_frames(render, repeats, warmup=1):
-    """(last image, [seconds per frame]) over ``repeats`` calls of ``render`` after
-    ``warmup`` untimed calls; ``render`` must return the image read back."""
-    image = None
-    for _ in range(warmup):
-        image = render()
-    times = []
-    for _ in range(max(1, repeats)):
-        t0 = time.perf_counter()
-        image = render()
-        times.append(time.perf_counter() - t0)
-    return image, times
+def interleaved_frames(calls, repeats, on_frame=None):
+    """Time several renderers on one scene, round robin: one untimed warm-up frame each
+    (compiling, uploading), then ``repeats`` rounds of one timed frame each, so that a
+    change in the machine's load falls on all of them alike. Each call must return its
+    image read back (so the GL has finished). Returns (last images, [seconds] per call);
+    ``on_frame(k, i)`` is called after each frame (i = -1 for the warm-up)."""
+    images = [None] * len(calls)
+    times = [[] for _ in calls]
+    for k, call in enumerate(calls):
+        images[k] = call()
+        if on_frame:
+            on_frame(k, -1)
+    for i in range(max(1, repeats)):
+        for k, call in enumerate(calls):
+            t0 = time.perf_counter()
+            images[k] = call()
+            times[k].append(time.perf_counter() - t0)
+            if on_frame:
+                on_frame(k, i)
+    return images, times
 
 
 def _row(dataset, scene, label, kind, skip, step_vox, step_world, times, err):
@@ -194,7 +210,7 @@ def _add_ratios(rows):
             r["rmse_vs_vtk"] = r["rmse"] / ref["rmse"] if ref["rmse"] > 0 else None
 
 
-def run(args, out=sys.stdout, err=sys.stderr):
+def run(args, err=sys.stderr):
     """Run the benchmark; returns (rows, info)."""
     import dvr_gl
     # The function, imported from its module: ``dvr_gl.reference.exact`` the attribute
@@ -225,7 +241,8 @@ def run(args, out=sys.stdout, err=sys.stderr):
         raise SystemExit("dvr-gl bench: no data set could be loaded")
 
     renderers = [r for r in RENDERERS if r[1] != "vtk" or peer is not None]
-    progress = Progress(len(sets) * (1 + len(steps) * len(renderers)), stream=err)
+    frames = 1 + args.repeats  # one warm-up frame, then the timed ones
+    progress = Progress(len(sets) * (1 + len(steps) * len(renderers) * frames), stream=err)
     rows = []
     info = {}
     try:
@@ -242,19 +259,22 @@ def run(args, out=sys.stdout, err=sys.stderr):
                 progress.advance(f"{name}: exact image")
                 for step_vox in steps:
                     step = step_vox * volume.min_spacing
+                    calls = []
                     for label, kind, skip in renderers:
-                        what = f"{name}: {label} step {step_vox:g}"
-                        progress.begin(what)
                         if kind == "vtk":
-                            peer.setup(scene, step)
-                            image, times = time_frames(peer.frame, args.repeats)
+                            peer.setup(scene, step)  # the peer serves this scene only, here
+                            calls.append(peer.frame)
                         else:
-                            def render(scene=scene, step=step, skip=skip):
-                                return gl.render(scene, technique="raycast", step=step, skip_empty=skip)
-                            image, times = time_frames(render, args.repeats)
-                        rows.append(_row(name, scene, label, kind, skip, step_vox, step, times,
+                            calls.append(functools.partial(gl.render, scene, technique="raycast",
+                                                           step=step, skip_empty=skip))
+                    images, times = interleaved_frames(
+                        calls, args.repeats,
+                        lambda k, i: progress.advance(
+                            f"{name} step {step_vox:g}: {renderers[k][0]} "
+                            + ("warm-up" if i < 0 else f"frame {i + 1}/{args.repeats}")))
+                    for (label, kind, skip), image, ts in zip(renderers, images, times):
+                        rows.append(_row(name, scene, label, kind, skip, step_vox, step, ts,
                                          metrics.compare(image, exact)))
-                        progress.advance(what)
     finally:
         progress.close()
         if peer is not None:
@@ -285,10 +305,11 @@ def _fmt(v, spec):
 
 
 def format_table(rows):
-    head = ("data", "step", "renderer", "ms/frame", "RMSE", "max err", "PSNR dB", "t/VTK", "err/VTK")
+    head = ("data", "step", "renderer", "ms/frame", "min ms", "RMSE", "max err", "PSNR dB", "t/VTK", "err/VTK")
     lines = []
     for r in rows:
         lines.append((r["dataset"], f"{r['step_voxels']:g}", r["renderer"], _fmt(r["ms_median"], ".1f"),
+                      _fmt(r["ms_min"], ".1f"),
                       _fmt(r["rmse"], ".2e"), _fmt(r["max_abs"], ".3f"), _fmt(r["psnr"], ".1f"),
                       _fmt(r["time_vs_vtk"], ".2f"), _fmt(r["rmse_vs_vtk"], ".2f")))
     widths = [max(len(h), *(len(l[i]) for l in lines)) if lines else len(h) for i, h in enumerate(head)]

@@ -65,7 +65,8 @@ class Renderer:
             loader.release()
 
     def info(self) -> dict:
-        return dict(describe(self.ctx), backend=self.backend)
+        with self.ctx:  # another library (VTK) may have made its own context current
+            return dict(describe(self.ctx), backend=self.backend)
 
     # -- rendering --------------------------------------------------------------------
     def render(self, scene, technique="raycast", step=None, **options):

@@ -30,9 +30,12 @@ How the scene is matched
   1, so ``m`` is the plain mean, and classifies it with the scene's transfer function
   (on the CPU, inside the timed frame). ``isosurface``: VTK's iso-surface blend mode
   with shading on, the scene's (ka, kd, ks, shininess), VTK's automatic headlight and
-  opacity 1; VTK's gradient estimate and lighting are its own (a surface facing the
-  camera gets ``c * (ka + kd) + ks``, as in the contract), and VTK takes the first
-  sample past the crossing, so isosurface images are a looser match.
+  opacity 1. VTK's lighting is its own: the light is a point at the camera position
+  (for an orthographic camera too) and the specular term is Phong's ``(R.V)^n``, not
+  the contract's headlight Blinn-Phong ``(N.H)^n`` with H = L = V. They agree where the
+  normal is along the ray (a surface facing the camera gets ``c * (ka + kd) + ks``) and
+  differ elsewhere; VTK also shades the first sample past the crossing. Isosurface
+  images are therefore a looser match than the unshaded modes.
 
 Read-back: premultiplied float RGBA
 -----------------------------------

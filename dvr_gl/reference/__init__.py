@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 from ..techniques import get_technique
+# Imported here, not inside a function, so the package attribute `exact` is the function
+# for good: importing the submodule first would otherwise leave the module in its place.
+from .exact import exact
 
 
 def render(scene, technique="raycast", step=None, *, lut_exact=False, **options):
@@ -26,8 +29,3 @@ def quantize_unorm8(image):
     import numpy as np
     return np.round(np.clip(image, 0, 1) * 255) / 255
 
-
-def exact(scene, **kwargs):
-    """The exact image of the contract; see ``dvr_gl.reference.exact.exact``."""
-    from .exact import exact as _exact
-    return _exact(scene, **kwargs)
