@@ -285,6 +285,78 @@ def run(args, err=sys.stderr):
     return rows, info
 
 
+def equal_error_and_time(rows):
+    """For each VTK row: dvr_gl's (skipping on) frame time at VTK's error, and its error at
+    VTK's frame time, interpolated log-log between dvr_gl's steps (None outside their
+    range). Returns rows of dicts with the two ratios (dvr_gl / VTK; below 1 is better)."""
+    out = []
+    for v in (r for r in rows if r["kind"] == "vtk"):
+        mine = sorted((r for r in rows if r["dataset"] == v["dataset"] and r["kind"] != "vtk"
+                       and r.get("skip_empty")), key=lambda r: r["rmse"])
+        if len(mine) < 2:
+            continue
+        err = np.log([r["rmse"] for r in mine])
+        ms = np.log([r["ms_median"] for r in mine])
+        t_at_err = _interp(math.log(v["rmse"]), err, ms)
+        order = np.argsort(ms)
+        e_at_t = _interp(math.log(v["ms_median"]), ms[order], err[order])
+        out.append({"dataset": v["dataset"], "vtk_step_voxels": v["step_voxels"],
+                    "vtk_ms": v["ms_median"], "vtk_rmse": v["rmse"],
+                    "time_ratio_at_equal_error": None if t_at_err is None else math.exp(t_at_err) / v["ms_median"],
+                    "error_ratio_at_equal_time": None if e_at_t is None else math.exp(e_at_t) / v["rmse"]})
+    return out
+
+
+def _interp(x, xs, ys):
+    if not xs[0] <= x <= xs[-1]:
+        return None
+    return float(np.interp(x, xs, ys))
+
+
+def texture_format_throughput(renderer, size=256, samples=64, repeats=5):
+    """Trilinear samples per second from a 3-D texture stored as float32, float16 and
+    unorm8: every pixel of a size x size target sums ``samples`` lookups along a line."""
+    import time
+    ctx = renderer.ctx
+    vs = "#version 330 core\nin vec2 a_pos; void main() { gl_Position = vec4(a_pos, 0.0, 1.0); }"
+    fs = f"""#version 330 core
+uniform sampler3D t_volume;
+out vec4 f_color;
+void main() {{
+    vec2 uv = gl_FragCoord.xy / {size}.0;
+    float acc = 0.0;
+    for (int i = 0; i < {samples}; ++i)
+        acc += texture(t_volume, vec3(uv, (float(i) + 0.37) / {samples}.0)).r;
+    f_color = vec4(acc);
+}}"""
+    rng = np.random.default_rng(0)
+    data = rng.random((128, 128, 128)).astype(np.float32)
+    result = {}
+    with ctx:
+        prog = ctx.program(vertex_shader=vs, fragment_shader=fs)
+        vbo = ctx.buffer(np.array([-1, -1, 3, -1, -1, 3], "f4").tobytes())
+        vao = ctx.vertex_array(prog, [(vbo, "2f", "a_pos")])
+        target = ctx.texture((size, size), 4, dtype="f4")
+        fbo = ctx.framebuffer([target])
+        for dtype, array in (("f4", data), ("f2", data.astype(np.float16)), ("f1", (data * 255).astype(np.uint8))):
+            tex = ctx.texture3d((128, 128, 128), 1, array.tobytes(), dtype=dtype)
+            tex.filter = (ctx.LINEAR, ctx.LINEAR)
+            tex.use(0)
+            fbo.use()
+            times = []
+            for i in range(repeats + 1):
+                t = time.perf_counter()
+                vao.render()
+                fbo.read(components=1, dtype="f4")  # GL has finished
+                if i:
+                    times.append(time.perf_counter() - t)
+            result[{"f4": "float32", "f2": "float16", "f1": "unorm8"}[dtype]] = size * size * samples / float(np.median(times))
+            tex.release()
+        for obj in (vao, vbo, prog):
+            obj.release()
+    return result
+
+
 def _vtk_version():
     try:
         from vtkmodules.vtkCommonCore import vtkVersion
@@ -429,6 +501,8 @@ def add_arguments(parser):
                         help=f"path of the chest CT (default $DVR_GL_DATA or {DEFAULT_DATA_DIR} / {CHEST_FILE})")
     parser.add_argument("--backend", default="auto", help="dvr_gl GL backend (auto, egl, osmesa)")
     parser.add_argument("--no-vtk", action="store_true", help="leave VTK out")
+    parser.add_argument("--textures", action="store_true",
+                        help="also measure trilinear sampling throughput of float32, float16 and unorm8 textures")
     parser.add_argument("--vtk-float", action="store_true",
                         help="give VTK the samples as float32 instead of their own type")
     return parser
@@ -456,6 +530,20 @@ def run_bench(args) -> int:
           f"{info['size']}x{info['size']}, median of {info['repeats']} frames; "
           f"t/VTK and err/VTK divide by VTK's row at the same step")
     print(format_table(rows))
+    summary = equal_error_and_time(rows)
+    if summary:
+        print("at equal error / equal time (dvr_gl with skipping, interpolated log-log across its steps):")
+        for r in summary:
+            t = r["time_ratio_at_equal_error"]
+            e = r["error_ratio_at_equal_time"]
+            print(f"  {r['dataset']:6s} vs VTK at {r['vtk_step_voxels']:g} voxel: time ratio at equal error "
+                  f"{'n/a' if t is None else f'{t:.2f}'}, error ratio at equal time {'n/a' if e is None else f'{e:.2f}'}")
+    if args.textures:
+        import dvr_gl
+        with dvr_gl.Renderer(backend=args.backend) as gl:
+            rates = texture_format_throughput(gl)
+        print("trilinear samples per second by texture format: "
+              + ", ".join(f"{k} {v / 1e6:.0f} M" for k, v in rates.items()))
     if args.out:
         paths = write_results(rows, info, args.out)
         print("wrote " + ", ".join(str(p) for p in paths))
