@@ -7,7 +7,7 @@ from collections import OrderedDict
 
 import numpy as np
 
-from .gl.context import create_context, describe
+from .gl.context import describe, idle_framebuffer, shared_context
 from .gl.programs import ProgramCache
 from .cache import LRU, IdentityKey as _Key, TableCache
 from .techniques import get_technique
@@ -24,7 +24,7 @@ class Renderer:
     """
 
     def __init__(self, backend="auto"):
-        self.ctx, self.backend = create_context(backend)
+        self.ctx, self.backend = shared_context(backend)
         self.programs = ProgramCache(self.ctx)
         self.created = []  # a log of ("texture kind", shape) for every texture made
         self._volumes = LRU(2)
@@ -37,10 +37,7 @@ class Renderer:
         self._vaos = {}
         self.tables = TableCache()
         self._released = False
-        # moderngl re-binds the last bound framebuffer when it makes a new one: bind this
-        # 1x1 one before releasing any other, so the one it remembers is never deleted.
-        with self.ctx:
-            self._idle_fbo = self.ctx.framebuffer([self.ctx.texture((1, 1), 4, dtype="f1")])
+        self._idle_fbo = idle_framebuffer(self.ctx)  # bound before any target is released
 
     # -- lifetime ---------------------------------------------------------------------
     def __enter__(self):
@@ -58,11 +55,10 @@ class Renderer:
                 cache.release()
             for obj in list(self._small.values()) + list(self._vaos.values()) + list(self._vbos.values()):
                 obj.release()
+            self._idle_fbo.use()
             self.programs.release()
-        self.ctx.release()
-        loader = (self.ctx.extra or {}).get("osmesa_loader")
-        if loader is not None:
-            loader.release()
+        # The context itself is shared by the process's renderers and stays (see
+        # gl.context.shared_context).
 
     def info(self) -> dict:
         with self.ctx:  # another library (VTK) may have made its own context current

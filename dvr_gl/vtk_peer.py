@@ -84,6 +84,9 @@ SUPPORTED_MODES = ("composite", "mip", "minip", "average", "isosurface")
 _vtk = None
 
 
+_KEPT_WINDOWS = []
+
+
 class _KeepCurrentContext:
     """Puts back the EGL context that was current before VTK made its own current, so
     that a moderngl context used in the same thread (the dvr_gl Renderer, test fixtures)
@@ -393,7 +396,10 @@ class VTKPeer:
         with self._keep:
             self.renderer.RemoveAllViewProps()
             self.renderer.ReleaseGraphicsResources(self.window)
-            self.window.Finalize()
+        # No window.Finalize(): VTK's EGL window terminates the process's EGL display
+        # there, which kills every other context on it (dvr_gl's included). The window
+        # is kept until the process exits.
+        _KEPT_WINDOWS.append(self.window)
 
     def __enter__(self):
         return self

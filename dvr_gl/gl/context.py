@@ -144,6 +144,41 @@ def create_context(backend="auto"):
     raise BackendUnavailable("no OpenGL 3.3 core context could be created; tried:\n" + "\n".join(failures))
 
 
+_SHARED = {}
+
+
+def shared_context(backend="auto"):
+    """The process's context for ``backend`` (made on first use, kept until exit) and the
+    name of the backend behind it. Renderers share it and release only their own objects:
+    tearing down an EGL context can invalidate the other contexts on the same display
+    once another library (VTK) has used it, so contexts are never destroyed mid-process."""
+    key = backend
+    if key not in _SHARED:
+        if backend == "auto":
+            for name in BACKENDS:  # reuse a backend already made before trying to make one
+                if name in _SHARED:
+                    _SHARED[key] = _SHARED[name]
+                    return _SHARED[key]
+        ctx, name = create_context(backend)
+        _SHARED[key] = _SHARED.setdefault(name, (ctx, name))
+    return _SHARED[key]
+
+
+_IDLE_FRAMEBUFFERS = {}
+
+
+def idle_framebuffer(ctx):
+    """A 1x1 framebuffer kept for the context's life. moderngl re-binds the last bound
+    framebuffer when it makes a new one, so that one must never have been released: bind
+    this before releasing any other. It also gives transform feedback a framebuffer (a
+    context with none bound refuses to draw even with rasterisation off)."""
+    fbo = _IDLE_FRAMEBUFFERS.get(id(ctx))
+    if fbo is None:
+        with ctx:
+            fbo = _IDLE_FRAMEBUFFERS[id(ctx)] = ctx.framebuffer([ctx.texture((1, 1), 4, dtype="f1")])
+    return fbo
+
+
 def describe(ctx) -> dict:
     """Renderer strings, GL version and the limits dvr_gl cares about."""
     info = ctx.info

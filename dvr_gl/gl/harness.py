@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .context import idle_framebuffer
 from .programs import apply_defines, resolve_text
 
 _TEMPLATE = """#version 330 core
@@ -17,19 +18,6 @@ void main() {{
     {body}
 }}
 """
-
-
-_IDLE = {}
-
-
-def _idle_framebuffer(ctx):
-    """A 1x1 framebuffer kept for the context's life: a context with no framebuffer bound
-    refuses to draw even with rasterisation off, and moderngl re-binds the last bound
-    framebuffer when it makes a new one, so that one must never be released."""
-    fbo = _IDLE.get(id(ctx))
-    if fbo is None:
-        fbo = _IDLE[id(ctx)] = ctx.framebuffer([ctx.texture((1, 1), 4, dtype="f1")])
-    return fbo
 
 
 def evaluate(ctx, includes, body, inputs, textures=None, uniforms=None, defines=None):
@@ -55,7 +43,7 @@ def evaluate(ctx, includes, body, inputs, textures=None, uniforms=None, defines=
             if name in prog:
                 prog[name].value = value
         out = ctx.buffer(reserve=n * 16)
-        _idle_framebuffer(ctx).use()
+        idle_framebuffer(ctx).use()
         vao.transform(out, mode=ctx.POINTS, vertices=n)
         result = np.frombuffer(out.read(), np.float32).reshape(n, 4).copy()
         for obj in [vao, out, prog] + buffers:
