@@ -51,7 +51,7 @@ from .common import ray_box, trilinear
 __all__ = ["exact", "VERSION"]
 
 # Changes whenever the integrator's output can change: part of the cache key.
-VERSION = "exact-1"
+VERSION = "exact-2"   # 2: windows no longer skip grid planes (rays nearly along an axis)
 
 _TOL = 1e-11             # accepted |K15 - G7| per part (optical depth and colour), times T
 _MAX_DEPTH = 52          # halving beyond this is below float64 resolution of the piece
@@ -224,21 +224,33 @@ class _Exact:
     # -- traversal ------------------------------------------------------------
     def pieces(self, o, d, tcur, t1, M):
         """The next (at most) M cell pieces of each ray from tcur on, masked cells left
-        out. Returns the flat pieces (ordered by ray, then t) and the new tcur."""
-        steps = np.arange(M + 1)
+        out. Returns the flat pieces (ordered by ray, then t) and the new tcur.
+
+        Per axis the candidates are the planes base, base +- 1, ..., base +- (M+1), where
+        base is the plane at or just behind tcur. A window starts on a plane (or on the
+        box face), so rounding may put base and base +- 1 at or behind tcur: only the
+        planes from base +- 2 on are sure to lie ahead, and M + 2 candidates leave at
+        least M of them per axis. The first M of all axes merged are then the true next M
+        planes. The window also never reaches past any axis's last candidate (the horizon),
+        so that no piece can skip a plane of an axis whose candidates ran out (on a ray
+        nearly along one axis almost all planes crossed are that axis's)."""
+        steps = np.arange(M + 2)
         cands = []
+        horizon = t1.copy()
         for a in range(3):
             da = d[:, a]
             p = (o[:, a] + tcur * da - self.origin[a]) / self.spacing[a]
             base = np.where(da > 0, np.floor(p), np.ceil(p))
             k = base[:, None] + np.sign(da)[:, None] * steps
             t = (self.origin[a] + k * self.spacing[a] - o[:, a, None]) / da[:, None]
-            # the base plane may lie just behind tcur; parallel axes give inf/nan
+            # planes beyond the last candidate are not known: stop the window there
+            horizon = np.minimum(horizon, np.where(da != 0, t[:, -1], np.inf))
+            # base (+- 1) may lie just behind tcur; parallel axes give inf/nan
             t[~(t > tcur[:, None])] = np.inf
             cands.append(t)
         c = np.concatenate(cands, axis=1)
         c.sort(axis=1)
-        c = np.minimum(c[:, :M], t1[:, None])
+        c = np.minimum(c[:, :M], horizon[:, None])
         bounds = np.concatenate([tcur[:, None], c], axis=1)
         ta, tb = bounds[:, :-1], bounds[:, 1:]
         rows, cols = np.nonzero(tb > ta)
