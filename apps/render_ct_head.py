@@ -14,8 +14,8 @@ from dvr_gl.io import save_png
 def render_once(size=256, backend="auto"):
     """The picture this app shows, as a float image (the headless path tests run)."""
     head = data.ct_head()
-    scene = dvr_gl.Scene(head, data.ct_head_tf(), dvr_gl.default_camera(head, azimuth=0, elevation=90),
-                         width=size, height=size)
+    from dvr_gl.demo import head_front_camera
+    scene = dvr_gl.Scene(head, data.ct_head_tf(), head_front_camera(head), width=size, height=size)
     with dvr_gl.Renderer(backend=backend) as r:
         return r.render(scene)
 

@@ -11,16 +11,26 @@ import time
 import numpy as np
 
 from . import data, metrics, reference
-from .scene import Scene, default_camera
+from .scene import Camera, Scene, default_camera
 from .techniques import names as technique_names
 
 TILE = 192  # pixels; small enough that the exact images take seconds, not minutes
 
 
+def head_front_camera(head, fov=30.0, zoom=1.15):
+    """Face on, upright: the CT head's face looks along -y and the top of its skull is at
+    z = 0, so the eye sits on -y with -z up."""
+    lo, hi = head.bounds
+    centre = (lo + hi) / 2
+    radius = float(np.linalg.norm(hi - lo)) / 2
+    distance = radius / np.sin(np.radians(fov) / 2) / zoom
+    return Camera(centre - [0.0, distance, 0.0], centre, up=(0.0, 0.0, -1.0), fov=fov)
+
+
 def demo_scenes(size=TILE):
     """(title, scene) pairs: the bundled CT head in three modes and the synthetic field."""
     head, field = data.ct_head(), data.synthetic()
-    head_cam = default_camera(head, azimuth=0, elevation=90, zoom=1.15)  # face on, upright
+    head_cam = head_front_camera(head)
     field_cam = default_camera(field, azimuth=25, elevation=20, zoom=1.2)
     return [
         ("CT head, composite", Scene(head, data.ct_head_tf(), head_cam, size, size)),

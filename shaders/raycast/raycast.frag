@@ -169,7 +169,7 @@ void main() {
         }
         bool above = s >= u_iso;
         if (above != above_prev) {
-            t_hit = refineIsoBisection(origin, dir, t_prev, tm, u_iso);
+            t_hit = tm;  // refined after the loop: keeps the loop body small
             break;
         }
         t_prev = tm;
@@ -190,6 +190,7 @@ void main() {
     }
 #elif MODE_ISOSURFACE
     if (t_hit >= 0.0) {
+        t_hit = refineIsoBisection(origin, dir, t_prev, t_hit, u_iso);
         vec3 p_hit = origin + t_hit * dir;
         vec3 rgb = applyTF(u_iso).rgb;
         f_color = vec4(shadeBlinnPhong(rgb, gradient(p_hit), dir), 1.0);
