@@ -35,13 +35,13 @@ import os
 import platform
 import statistics
 import sys
-import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
 from . import metrics
+from .io import atomic_write
 from .scene import Camera, Scene, TransferFunction, Volume
 
 STEPS_VOXELS = (1.0, 0.5, 0.25)
@@ -405,21 +405,6 @@ CSV_FIELDS = ("dataset", "width", "height", "renderer", "kind", "skip_empty", "s
               "time_vs_vtk", "rmse_vs_vtk")
 
 
-def _atomic_write(path, data: bytes):
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        raise
-
-
 def output_paths(out):
     """``out`` names a stem (a suffix .csv/.json/.png is dropped) or an existing folder
     (then ``<folder>/bench``); returns the three paths."""
@@ -439,14 +424,14 @@ def write_results(rows, info, out):
     w.writeheader()
     for r in rows:
         w.writerow({k: ("" if r[k] is None else r[k]) for k in CSV_FIELDS})
-    _atomic_write(csv_path, buf.getvalue().encode())
+    atomic_write(csv_path, buf.getvalue().encode())
 
     def clean(v):
         return None if isinstance(v, float) and not math.isfinite(v) else v
 
     doc = {"info": info, "rows": [{k: clean(v) for k, v in r.items()} for r in rows]}
-    _atomic_write(json_path, json.dumps(doc, indent=1, default=str).encode())
-    _atomic_write(png_path, figure_png(rows, info))
+    atomic_write(json_path, json.dumps(doc, indent=1, default=str).encode())
+    atomic_write(png_path, figure_png(rows, info))
     return csv_path, json_path, png_path
 
 

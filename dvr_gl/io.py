@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import gzip
 import math
+import io
 import os
 import re
 import secrets
@@ -643,10 +644,21 @@ def save_png(path, image, background=None):
         raise MissingFileError("path", f"the directory {directory!r} of {path!r} does not exist")
     if os.path.isdir(path):
         raise InputError("path", f"{path!r} is a directory")
+    buffer = io.BytesIO()
+    Image.fromarray(pixels).save(buffer, format="PNG")
+    atomic_write(path, buffer.getvalue())
+    return path
+
+
+def atomic_write(path, data: bytes):
+    """Write ``data`` to a temporary file beside ``path``, flush it to disk, then rename
+    it over ``path``: readers see the old file or the whole new one, never a part; on
+    any failure the temporary file is removed and ``path`` is left as it was."""
+    directory = os.path.dirname(os.path.abspath(path))
     tmp, fd = _temporary(directory, os.path.basename(path))
     try:
         with os.fdopen(fd, "wb") as f:
-            Image.fromarray(pixels).save(f, format="PNG")
+            f.write(data)
             f.flush()
             os.fsync(f.fileno())
         os.replace(tmp, path)
@@ -656,7 +668,6 @@ def save_png(path, image, background=None):
         except FileNotFoundError:
             pass
         raise
-    return path
 
 
 def _temporary(directory, name):

@@ -3,7 +3,6 @@ scenes need (made on first use, kept while the scene's objects live, never per f
 
 from __future__ import annotations
 
-from collections import OrderedDict
 
 import numpy as np
 

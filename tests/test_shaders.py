@@ -230,7 +230,6 @@ def test_refine_iso_bisection(ctx, renderer, small_volume):
     straddle = (sample(ta) >= iso) != (sample(tb) >= iso)
     assert straddle.sum() > 20
     o, d, ta, tb = o[straddle], d[straddle], ta[straddle], tb[straddle]
-    n = len(o)
     gl = harness.evaluate(ctx, ["common/isosurface.glsl"],
                           "out0 = vec4(refineIsoBisection(in0.xyz, in1.xyz, in0.w, in1.w, 7.5));",
                           [np.c_[o, ta], np.c_[d, tb]], textures={"t_volume": _made(renderer, renderer.volume_texture, v)},

@@ -7,6 +7,8 @@ from ..techniques import get_technique
 # for good: importing the submodule first would otherwise leave the module in its place.
 from .exact import exact
 
+__all__ = ["exact", "quantize_unorm8", "render"]
+
 
 def render(scene, technique="raycast", step=None, *, lut_exact=False, **options):
     """The NumPy reference image of ``technique`` for ``scene``: the same sample positions,

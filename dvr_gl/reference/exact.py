@@ -40,8 +40,8 @@ texture) clamped to the domain box.
 
 from __future__ import annotations
 
+import io
 import os
-import tempfile
 
 import numpy as np
 
@@ -696,16 +696,9 @@ def exact(scene, cache=True, cache_dir=None) -> np.ndarray:
     with np.errstate(divide="ignore", invalid="ignore", over="ignore", under="ignore"):
         img = _render(scene)
     if path is not None:
+        from ..io import atomic_write
         os.makedirs(directory, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=".exact-", suffix=".npy.tmp", dir=directory)
-        try:
-            with os.fdopen(fd, "wb") as f:
-                np.save(f, img)
-            os.replace(tmp, path)        # atomic: readers never see a partial file
-        except BaseException:
-            try:
-                os.unlink(tmp)
-            except OSError:
-                pass
-            raise
+        buffer = io.BytesIO()
+        np.save(buffer, img)
+        atomic_write(path, buffer.getvalue())  # readers never see a partial file
     return img
