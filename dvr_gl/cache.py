@@ -54,11 +54,13 @@ def _release(value):
 
 
 class TableCache:
-    """CPU tables derived from one scene object (a TF's lookup table, a volume's brick
-    value ranges): built on first use, reused while the object lives in the cache."""
+    """CPU tables derived from scene objects (a TF's lookup table, a volume's brick value
+    ranges, their occupancy): built on first use, reused while the objects live in the
+    cache."""
 
     def __init__(self, capacity=4):
         self._lru = LRU(capacity)
 
-    def get(self, kind, obj, make):
-        return self._lru.get(IdentityKey(kind, obj), lambda: make(obj))
+    def get(self, kind, *objects, make):
+        """``make(*objects)``, built once while these objects stay in the cache."""
+        return self._lru.get(IdentityKey(kind, *objects), lambda: make(*objects))

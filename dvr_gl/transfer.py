@@ -45,21 +45,21 @@ class LookupTable:
         self.table = table.astype(np.float32)
         self.transparency = (1.0 - table[:, 3]).astype(np.float32)
 
-    def lookup(self, s):
-        """RGBA at data values ``s`` (float64 arithmetic on the float32 table)."""
+    def _interpolate(self, rows, s):
+        """Twin of GLSL ``lookupTFRow``: linear between entries, float64 arithmetic."""
         u = np.clip((np.asarray(s, dtype=np.float64) - self.lo) * self.scale, 0.0, self.size - 1)
         i0 = np.minimum(np.floor(u).astype(np.int64), self.size - 2)
-        f = (u - i0)[..., None]
-        t = self.table.astype(np.float64)
+        f = (u - i0).reshape(u.shape + (1,) * (rows.ndim - 1))
+        t = rows.astype(np.float64)
         return t[i0] * (1 - f) + t[i0 + 1] * f
+
+    def lookup(self, s):
+        """RGBA at data values ``s`` (float64 arithmetic on the float32 table)."""
+        return self._interpolate(self.table, s)
 
     def lookup_transparency(self, s):
         """1 - alpha at data values ``s``, from the transparency row."""
-        u = np.clip((np.asarray(s, dtype=np.float64) - self.lo) * self.scale, 0.0, self.size - 1)
-        i0 = np.minimum(np.floor(u).astype(np.int64), self.size - 2)
-        f = u - i0
-        t = self.transparency.astype(np.float64)
-        return t[i0] * (1 - f) + t[i0 + 1] * f
+        return self._interpolate(self.transparency, s)
 
     def texture_rows(self):
         """(2, n, 4) float32: row 0 RGBA, row 1 transparency in its first channel."""

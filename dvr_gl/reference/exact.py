@@ -46,7 +46,8 @@ import os
 import numpy as np
 
 from ..scene import Scene
-from .common import ray_box, trilinear
+from .common import ray_box
+from .shading import gradient, gradient_epsilon, shade_blinn_phong
 
 __all__ = ["exact", "VERSION"]
 
@@ -603,22 +604,9 @@ class _Exact:
 
     # -- shading -----------------------------------------------------------------------
     def shade(self, points, dirs):
-        vol = self.vol
-        ka, kd, ks, shininess = self.scene.phong
-        idx = (points - vol.origin) / vol.spacing
-        g = np.empty_like(idx)
-        for ax in range(3):
-            e = np.zeros(3)
-            e[ax] = 1.0
-            g[:, ax] = (trilinear(self.values, idx + e) - trilinear(self.values, idx - e)) / (2 * vol.spacing[ax])
         c = np.broadcast_to(self.tf.color(self.scene.iso_value), points.shape)
-        glen = np.linalg.norm(g, axis=1)
-        lo, hi = vol.data_range
-        lit = glen > 1e-6 * (hi - lo) / vol.min_spacing
-        n = -g / np.where(lit, glen, 1.0)[:, None]
-        ndl = np.abs(np.sum(n * -dirs, axis=1))     # L = V = H = -ray direction
-        shaded = c * (ka + kd * ndl)[:, None] + (ks * ndl ** shininess)[:, None]
-        return np.where(lit[:, None], shaded, c)
+        g = gradient(self.vol, self.values, points)
+        return shade_blinn_phong(c, g, dirs, self.scene.phong, gradient_epsilon(self.vol))
 
 
 def _classify(tf, s):

@@ -38,6 +38,7 @@ skip_empty : empty-space skipping (composite mode only). The volume is cut into 
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 
@@ -106,15 +107,16 @@ def make_plan(scene, step=None, *, target="rgba32f", jitter_seed=None, ert_trans
         raise TypeError(f"skip_empty must be True or False, got {skip_empty!r}")
 
     composite = scene.mode == "composite"
-    lut = tables.get("lut", scene.tf, LookupTable)
+    lut = tables.get("lut", scene.tf, make=LookupTable)
     jitter = None
     if jitter_seed is not None:
-        rng = np.random.default_rng(int(jitter_seed))
-        jitter = rng.random((JITTER_TABLE, JITTER_TABLE)).astype(np.float32)
+        jitter = jitter_table(int(jitter_seed))
     occupancy = None
     if skip_empty and composite:
-        ranges = tables.get("brick_ranges", scene.volume, brick_value_ranges)
-        occupancy = brick_occupancy(ranges, lut)
+        # once per volume and once per (volume, TF) respectively, never per frame
+        ranges = tables.get("brick_ranges", scene.volume, make=brick_value_ranges)
+        occupancy = tables.get("occupancy", scene.volume, scene.tf,
+                               make=lambda volume, tf: brick_occupancy(ranges, lut))
     defines = {f"MODE_{scene.mode.upper()}": 1}
     if scene.camera.is_ortho:
         defines["ORTHO"] = 1
@@ -129,6 +131,14 @@ def make_plan(scene, step=None, *, target="rgba32f", jitter_seed=None, ert_trans
         defines["MASK_NONFINITE"] = 1
     return RaycastPlan(scene=scene, step=step, lut=lut, target=target, jitter=jitter,
                        ert_transmittance=ert, occupancy=occupancy, defines=defines)
+
+
+@functools.lru_cache(maxsize=8)
+def jitter_table(seed):
+    """The 64x64 jitter offsets in [0, 1) for ``seed`` (read-only; made once per seed)."""
+    table = np.random.default_rng(seed).random((JITTER_TABLE, JITTER_TABLE)).astype(np.float32)
+    table.setflags(write=False)
+    return table
 
 
 def _block_reduce(a, axis, reduce):
