@@ -317,6 +317,7 @@ def texture_format_throughput(renderer, size=256, samples=64, repeats=5):
     """Trilinear samples per second from a 3-D texture stored as float32, float16 and
     unorm8: every pixel of a size x size target sums ``samples`` lookups along a line."""
     import time
+    from .gl.context import current
     ctx = renderer.ctx
     vs = "#version 330 core\nin vec2 a_pos; void main() { gl_Position = vec4(a_pos, 0.0, 1.0); }"
     fs = f"""#version 330 core
@@ -332,7 +333,7 @@ void main() {{
     rng = np.random.default_rng(0)
     data = rng.random((128, 128, 128)).astype(np.float32)
     result = {}
-    with ctx:
+    with current(ctx):
         prog = ctx.program(vertex_shader=vs, fragment_shader=fs)
         vbo = ctx.buffer(np.array([-1, -1, 3, -1, -1, 3], "f4").tobytes())
         vao = ctx.vertex_array(prog, [(vbo, "2f", "a_pos")])

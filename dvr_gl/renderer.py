@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .gl.context import describe, idle_framebuffer, shared_context
+from .gl.context import current, describe, idle_framebuffer, shared_context
 from .gl.programs import ProgramCache
 from .cache import LRU, IdentityKey as _Key, TableCache
 from .techniques import get_technique
@@ -20,10 +20,19 @@ class Renderer:
 
     ``img`` is (H, W, 4) float32 premultiplied RGBA, row 0 on top. The first render of a
     scene compiles and uploads; later ones reuse the programs, textures and targets.
+    To work in the renderer's context yourself, enter it with
+    ``dvr_gl.gl.context.current(renderer.ctx)``, not ``with renderer.ctx`` (moderngl's
+    does not nest with the renderer's own).
     """
 
-    def __init__(self, backend="auto"):
-        self.ctx, self.backend = shared_context(backend)
+    def __init__(self, backend="auto", ctx=None):
+        """``backend``: "auto" (EGL, then OSMesa), "egl" or "osmesa": a headless context
+        shared by the process. ``ctx``: render in this moderngl context instead (a
+        window's, as the viewer does); the caller keeps it current and owns it."""
+        if ctx is not None:
+            self.ctx, self.backend = ctx, "window"
+        else:
+            self.ctx, self.backend = shared_context(backend)
         self.programs = ProgramCache(self.ctx)
         self.created = []  # a log of ("texture kind", shape) for every texture made
         self._volumes = LRU(2)
@@ -49,7 +58,7 @@ class Renderer:
         if self._released:
             return
         self._released = True
-        with self.ctx:
+        with current(self.ctx):
             for cache in (self._volumes, self._tfs, self._occupancy, self._masks, self._targets):
                 cache.release()
             for obj in list(self._small.values()) + list(self._vaos.values()) + list(self._vbos.values()):
@@ -60,18 +69,29 @@ class Renderer:
         # gl.context.shared_context).
 
     def info(self) -> dict:
-        with self.ctx:  # another library (VTK) may have made its own context current
+        with current(self.ctx):  # another library (VTK) may have made its own context current
             return dict(describe(self.ctx), backend=self.backend)
 
     # -- rendering --------------------------------------------------------------------
     def render(self, scene, technique="raycast", step=None, **options):
         """Render ``scene``; see the technique's module for its options."""
+        with current(self.ctx):
+            fbo = self._draw(scene, technique, step, options)
+            return self.read_target(fbo, scene.width, scene.height)
+
+    def render_target(self, scene, technique="raycast", step=None, **options):
+        """Render into the renderer's float target and return that framebuffer, without
+        reading it back (the viewer draws its colour attachment to the window). The
+        framebuffer is reused by the next render of the same size and format."""
+        with current(self.ctx):
+            return self._draw(scene, technique, step, options)
+
+    def _draw(self, scene, technique, step, options):
         if self._released:
             raise RuntimeError("this Renderer has been released")
         tech = get_technique(technique)
-        with self.ctx:
-            plan = tech.make_plan(scene, step, tables=self.tables, **options)
-            return tech.draw(self, plan)
+        plan = tech.make_plan(scene, step, tables=self.tables, **options)
+        return tech.draw(self, plan)
 
     # -- resources (used by techniques) -------------------------------------------------
     def _texture3d(self, kind, array, components, dtype, linear):

@@ -157,3 +157,21 @@ def test_default_camera_fits_and_rotates():
     np.testing.assert_allclose(top.forward, [0, -1, 0], atol=1e-12)
     with pytest.raises(ValueError, match="zoom must be positive, got 0"):
         dvr_gl.default_camera(VOL, zoom=0)
+
+
+def test_render_inside_an_entered_context_reads_back_the_image(renderer):
+    """Renderer calls nest inside a caller's ``current(ctx)`` block: moderngl's own
+    ``with ctx`` does not nest (leaving the inner block leaves no context current, and a
+    read-back returns uninitialised memory)."""
+    from dvr_gl.gl.context import current
+    volume = dvr_gl.Volume(np.linspace(0, 1, 64, dtype=np.float32).reshape(4, 4, 4))
+    tf = dvr_gl.TransferFunction([(0, 1, 1, 1), (1, 1, 1, 1)], [(0, 0.5), (1, 0.5)])
+    scene = dvr_gl.Scene(volume, tf, dvr_gl.default_camera(volume), width=16, height=16)
+    plain = renderer.render(scene)
+    with current(renderer.ctx):
+        fbo = renderer.render_target(scene)
+        inner = renderer.read_target(fbo, 16, 16)
+        again = renderer.render(scene)
+    assert np.isfinite(inner).all() and plain[..., 3].max() > 0
+    np.testing.assert_array_equal(inner, plain)
+    np.testing.assert_array_equal(again, plain)

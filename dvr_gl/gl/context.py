@@ -8,6 +8,7 @@ install. Contexts are OpenGL 3.3 core or newer.
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import ctypes.util
 
@@ -164,6 +165,31 @@ def shared_context(backend="auto"):
     return _SHARED[key]
 
 
+_CURRENT_DEPTH = {}
+
+
+@contextlib.contextmanager
+def current(ctx):
+    """Make ``ctx`` current for the block, re-entrantly. moderngl's own ``with ctx`` must
+    not be nested: leaving the inner block restores what was current before the *outer*
+    one (often nothing), and a read-back then silently returns uninitialised memory."""
+    key = id(ctx)
+    depth = _CURRENT_DEPTH.get(key, 0)
+    if depth:
+        _CURRENT_DEPTH[key] = depth + 1
+        try:
+            yield ctx
+        finally:
+            _CURRENT_DEPTH[key] -= 1
+        return
+    with ctx:
+        _CURRENT_DEPTH[key] = 1
+        try:
+            yield ctx
+        finally:
+            _CURRENT_DEPTH[key] = 0
+
+
 _IDLE_FRAMEBUFFERS = {}
 
 
@@ -174,7 +200,7 @@ def idle_framebuffer(ctx):
     context with none bound refuses to draw even with rasterisation off)."""
     fbo = _IDLE_FRAMEBUFFERS.get(id(ctx))
     if fbo is None:
-        with ctx:
+        with current(ctx):
             fbo = _IDLE_FRAMEBUFFERS[id(ctx)] = ctx.framebuffer([ctx.texture((1, 1), 4, dtype="f1")])
     return fbo
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .context import idle_framebuffer
+from .context import current, idle_framebuffer
 from .programs import apply_defines, resolve_text
 
 _TEMPLATE = """#version 330 core
@@ -30,7 +30,7 @@ def evaluate(ctx, includes, body, inputs, textures=None, uniforms=None, defines=
         arrays.append(np.zeros((n, 4), np.float32))
     src = _TEMPLATE.format(includes="\n".join(f'#include "{i}"' for i in includes), body=body)
     src = apply_defines(resolve_text(src), defines or {})
-    with ctx:
+    with current(ctx):
         prog = ctx.program(vertex_shader=src, varyings=["out0"])
         buffers = [ctx.buffer(a.tobytes()) for a in arrays]
         layout = [(buf, "4f", f"in{i}") for i, buf in enumerate(buffers) if f"in{i}" in prog]

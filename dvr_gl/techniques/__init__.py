@@ -1,6 +1,6 @@
 """The techniques, by name. Each module offers ``make_plan(scene, step, **options)`` (the
-plan the GL path and the NumPy reference share), ``draw(renderer, plan)`` and its option
-names; the reference of the same name lives in ``dvr_gl.reference``."""
+plan the GL path and the NumPy reference share), ``draw(renderer, plan)`` (renders into
+``renderer.target(...)`` and returns that framebuffer) and its option names; the reference of the same name lives in ``dvr_gl.reference``."""
 
 from __future__ import annotations
 

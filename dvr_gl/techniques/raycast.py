@@ -244,7 +244,8 @@ def _proxy(plan):
 
 
 def draw(renderer, plan):
-    """Render the plan; returns (H, W, 4) float32 premultiplied RGBA, row 0 on top."""
+    """Render the plan into the renderer's target for its size and format; returns that
+    framebuffer (premultiplied RGBA, GL's row order: row 0 at the bottom)."""
     ctx = renderer.ctx
     scene = plan.scene
     volume = scene.volume
@@ -300,7 +301,7 @@ def draw(renderer, plan):
         ctx.disable(ctx.CULL_FACE)
     vao.render()
     ctx.disable(ctx.CULL_FACE)
-    return renderer.read_target(fbo, scene.width, scene.height)
+    return fbo
 
 
 PROXY_MESHES = {"box": _unit_cube_back_face_mesh, "fullscreen": lambda: _FULLSCREEN}
