@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import dvr_gl
-from dvr_gl.gl.context import BackendUnavailable
+from dvr_gl.gl.context import BackendUnavailable, current
 
 _renderers = {}
 
@@ -47,10 +47,10 @@ def egl_renderer():
 def ctx(renderer):
     """The renderer's context, checked for GL errors before and after the test."""
     c = renderer.ctx
-    with c:
+    with current(c):
         assert c.error == "GL_NO_ERROR"
     yield c
-    with c:
+    with current(c):
         assert c.error == "GL_NO_ERROR"
 
 

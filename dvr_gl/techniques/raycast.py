@@ -48,10 +48,11 @@ from ..cache import TableCache
 from ..reference.shading import gradient_epsilon
 from ..scene import Scene
 from ..transfer import LookupTable
+from .common import (TARGETS, bind, camera_uniforms, check_flag, check_scene, check_step, check_target,
+                     box_proxy, tf_uniforms, volume_uniforms)
 
 BRICK = 8            # brick edge in cells, for empty-space skipping
 JITTER_TABLE = 64    # jitter table edge in pixels
-TARGETS = {"rgba32f": "f4", "rgba16f": "f2", "rgba8": "f1"}
 
 
 @dataclass
@@ -83,28 +84,16 @@ def make_plan(scene, step=None, *, target="rgba32f", jitter_seed=None, ert_trans
     ``dvr_gl.cache.TableCache``) keeps the TF's lookup table and the volume's brick
     ranges between frames."""
     tables = tables or TableCache()
-    if not isinstance(scene, Scene):
-        raise TypeError(f"scene must be a dvr_gl.Scene, got {type(scene).__name__}")
-    if step is None:
-        step = default_step(scene.volume)
-    if isinstance(step, bool) or not isinstance(step, (int, float, np.floating, np.integer)):
-        raise TypeError(f"step must be a number (world units), got {step!r}")
-    step = float(step)
-    if not math.isfinite(step) or step <= 0:
-        raise ValueError(f"step must be positive and finite, got {step!r}")
-    diagonal = float(np.linalg.norm(scene.volume.extent))
-    if diagonal / step > 1e6:
-        raise ValueError(f"step {step!r} is absurdly small for a box {diagonal:.4g} across (over 1e6 segments per ray)")
-    if target not in TARGETS:
-        raise ValueError(f"target must be one of {', '.join(TARGETS)}, got {target!r}")
+    check_scene(scene, "raycast")
+    step = default_step(scene.volume) if step is None else check_step(step, scene.volume)
+    check_target(target)
     if jitter_seed is not None and (isinstance(jitter_seed, bool) or not isinstance(jitter_seed, (int, np.integer))):
         raise TypeError(f"jitter_seed must be None or an integer, got {jitter_seed!r}")
     if isinstance(ert_transmittance, bool) or not isinstance(ert_transmittance, (int, float, np.floating)):
         raise TypeError(f"ert_transmittance must be a number, got {ert_transmittance!r}")
     if not 0 <= ert_transmittance < 1:
         raise ValueError(f"ert_transmittance must be in [0, 1), got {ert_transmittance!r}")
-    if not isinstance(skip_empty, (bool, np.bool_)):
-        raise TypeError(f"skip_empty must be True or False, got {skip_empty!r}")
+    check_flag("skip_empty", skip_empty)
 
     composite = scene.mode == "composite"
     lut = tables.get("lut", scene.tf, make=LookupTable)
@@ -210,39 +199,6 @@ def _unit_cube_back_face_mesh():
 _FULLSCREEN = np.array([[-1, -1, 0], [3, -1, 0], [-1, 3, 0]], np.float32)
 
 
-def _proxy(plan):
-    """('box', view_proj) or ('fullscreen', identity) for this camera."""
-    import pyrr
-    scene = plan.scene
-    cam = scene.camera
-    lo, _ = scene.volume.bounds
-    extent = scene.volume.extent
-    eye = cam.eye - lo
-    corners = np.array([[x, y, z] for z in (0, 1) for y in (0, 1) for x in (0, 1)]) * extent
-    depth = (corners - eye) @ cam.forward
-    margin = 1e-3 * float(np.linalg.norm(extent))
-    aspect = scene.width / scene.height
-    if cam.is_ortho:
-        near, far = float(depth.min()) - margin, float(depth.max()) + margin
-        hx, hy = cam.screen_scale(scene.width, scene.height)
-        proj = pyrr.matrix44.create_orthogonal_projection(-hx, hx, -hy, hy, near, far, dtype=np.float64)
-    else:
-        gap = np.maximum(np.maximum(-eye, eye - extent), 0.0)
-        distance = float(np.linalg.norm(gap))
-        if distance < margin:
-            return "fullscreen", np.eye(4)
-        # Every exit point is at least `distance` from the eye and within the view's
-        # diagonal half-angle of the axis, so this near plane never clips a back face.
-        hx, hy = cam.screen_scale(scene.width, scene.height)
-        cos_half_diag = 1.0 / math.sqrt(1.0 + hx * hx + hy * hy)
-        near = 0.5 * distance * cos_half_diag
-        far = float(depth.max()) * 1.01 + margin
-        proj = pyrr.matrix44.create_perspective_projection(cam.fov, aspect, near, far, dtype=np.float64)
-    view = pyrr.matrix44.create_look_at(eye, eye + cam.forward, cam.true_up, dtype=np.float64)
-    model = pyrr.matrix44.create_from_scale(extent, dtype=np.float64)
-    return "box", model @ view @ proj
-
-
 def draw(renderer, plan):
     """Render the plan into the renderer's target for its size and format; returns that
     framebuffer (premultiplied RGBA, GL's row order: row 0 at the bottom)."""
@@ -251,30 +207,15 @@ def draw(renderer, plan):
     volume = scene.volume
     prog = renderer.programs.get("raycast/raycast.vert", "raycast/raycast.frag", plan.defines)
 
-    units = {"t_volume": renderer.volume_texture(volume), "t_tf": renderer.tf_texture(plan.lut)}
+    textures = {"t_volume": renderer.volume_texture(volume), "t_tf": renderer.tf_texture(plan.lut)}
     if plan.jitter is not None:
-        units["t_jitter"] = renderer.small_texture("jitter", plan.jitter)
+        textures["t_jitter"] = renderer.small_texture("jitter", plan.jitter)
     if plan.occupancy is not None:
-        units["t_occupancy"] = renderer.occupancy_texture(volume, scene.tf, plan.occupancy)
+        textures["t_occupancy"] = renderer.occupancy_texture(volume, scene.tf, plan.occupancy)
     if volume.has_nonfinite:
-        units["t_cell_valid"] = renderer.cell_valid_texture(volume)
-    for unit, (name, tex) in enumerate(units.items()):
-        tex.use(location=unit)
-        if name in prog:
-            prog[name].value = unit
-
-    cam = scene.camera
-    lo, _ = volume.bounds
-    sx, sy = cam.screen_scale(scene.width, scene.height)
-    uniforms = {
-        "u_viewport": (scene.width, scene.height),
-        "u_eye": tuple(cam.eye - lo), "u_right": tuple(cam.right), "u_up": tuple(cam.true_up),
-        "u_forward": tuple(cam.forward), "u_screen": (sx, sy),
-        "u_extent": tuple(volume.extent), "u_step": plan.step,
-        "u_inv_unit": 1.0 / scene.tf.unit_distance, "u_max_segments": plan.max_segments,
-        "u_dims": tuple(float(n) for n in volume.dims), "u_spacing": tuple(volume.spacing),
-        "u_tf_lo": plan.lut.lo, "u_tf_scale": plan.lut.scale, "u_tf_size": plan.lut.size,
-    }
+        textures["t_cell_valid"] = renderer.cell_valid_texture(volume)
+    uniforms = {**camera_uniforms(scene), **volume_uniforms(volume), **tf_uniforms(plan.lut, scene.tf),
+                "u_step": plan.step, "u_max_segments": plan.max_segments}
     if plan.occupancy is not None:
         uniforms["u_brick"] = float(BRICK)
     if plan.ert_transmittance > 0:
@@ -283,11 +224,9 @@ def draw(renderer, plan):
         uniforms["u_iso"] = scene.iso_value
         uniforms["u_phong"] = scene.phong
         uniforms["u_gradient_epsilon"] = gradient_epsilon(volume)
-    for name, value in uniforms.items():
-        if name in prog:  # the compiler drops uniforms a variant does not use
-            prog[name].value = value
+    bind(prog, textures, uniforms)
 
-    kind, view_proj = _proxy(plan)
+    kind, view_proj = box_proxy(scene)
     prog["u_view_proj"].write(view_proj.astype("f4").tobytes())
     vao = renderer.proxy_vao(prog, kind)
     fbo = renderer.target(scene.width, scene.height, TARGETS[plan.target])

@@ -18,9 +18,6 @@
 #ifndef MODE_ISOSURFACE
 #define MODE_ISOSURFACE 0
 #endif
-#ifndef ORTHO
-#define ORTHO 0
-#endif
 #ifndef JITTER
 #define JITTER 0
 #endif
@@ -34,6 +31,7 @@
 #define MASK_NONFINITE 0
 #endif
 
+#include "common/camera_ray.glsl"
 #include "common/ray_box.glsl"
 #include "common/sampling.glsl"
 #include "common/classification.glsl"
@@ -43,12 +41,6 @@
 #include "common/isosurface.glsl"
 #endif
 
-uniform vec2 u_viewport;      // image width, height in pixels
-uniform vec3 u_eye;           // eye, relative to the box's lower corner
-uniform vec3 u_right;         // camera basis (world)
-uniform vec3 u_up;
-uniform vec3 u_forward;
-uniform vec2 u_screen;        // half extent of the view: at unit distance, or world (ortho)
 uniform vec3 u_extent;        // box size; the box is [0, u_extent]
 uniform float u_step;         // segment length, world units
 uniform float u_inv_unit;     // 1 / transfer-function unit distance
@@ -70,15 +62,8 @@ uniform float u_iso;
 out vec4 f_color;
 
 void main() {
-    vec2 ndc = gl_FragCoord.xy * (2.0 / u_viewport) - 1.0;
-    vec3 offset = (ndc.x * u_screen.x) * u_right + (ndc.y * u_screen.y) * u_up;
-#if ORTHO
-    vec3 origin = u_eye + offset;
-    vec3 dir = u_forward;
-#else
-    vec3 origin = u_eye;
-    vec3 dir = normalize(u_forward + offset);
-#endif
+    vec3 origin, dir;
+    pixelRay(origin, dir);
     vec2 range = intersectBox(origin, dir, vec3(0.0), u_extent);
     f_color = vec4(0.0);
     if (range.y <= range.x) return;

@@ -1,0 +1,143 @@
+"""What the techniques share: option checks, the uniforms every shader reads (camera,
+volume, transfer function), texture binding, and the eye-space projection of proxy
+geometry. Positions on the GPU are relative to the volume box's lower corner."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..scene import Scene
+
+TARGETS = {"rgba32f": "f4", "rgba16f": "f2", "rgba8": "f1"}
+
+
+def check_scene(scene, technique, modes=None):
+    if not isinstance(scene, Scene):
+        raise TypeError(f"scene must be a dvr_gl.Scene, got {type(scene).__name__}")
+    if modes is not None and scene.mode not in modes:
+        raise ValueError(f"{technique} renders mode {' or '.join(repr(m) for m in modes)}, "
+                         f"got mode {scene.mode!r}")
+
+
+def check_target(target):
+    if target not in TARGETS:
+        raise ValueError(f"target must be one of {', '.join(TARGETS)}, got {target!r}")
+    return target
+
+
+def check_flag(name, value):
+    if not isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{name} must be True or False, got {value!r}")
+    return bool(value)
+
+
+def check_step(step, volume, name="step"):
+    """A positive, finite distance in world units, not absurdly small for the box."""
+    if isinstance(step, bool) or not isinstance(step, (int, float, np.floating, np.integer)):
+        raise TypeError(f"{name} must be a number (world units), got {step!r}")
+    step = float(step)
+    if not math.isfinite(step) or step <= 0:
+        raise ValueError(f"{name} must be positive and finite, got {step!r}")
+    diagonal = float(np.linalg.norm(volume.extent))
+    if diagonal / step > 1e6:
+        raise ValueError(f"{name} {step!r} is absurdly small for a box {diagonal:.4g} across "
+                         f"(over 1e6 samples per ray)")
+    return step
+
+
+def camera_uniforms(scene):
+    """Uniforms of shaders/common/camera_ray.glsl."""
+    cam = scene.camera
+    lo, _ = scene.volume.bounds
+    sx, sy = cam.screen_scale(scene.width, scene.height)
+    return {"u_viewport": (scene.width, scene.height), "u_eye": tuple(cam.eye - lo),
+            "u_right": tuple(cam.right), "u_up": tuple(cam.true_up), "u_forward": tuple(cam.forward),
+            "u_screen": (sx, sy)}
+
+
+def volume_uniforms(volume):
+    """Uniforms of shaders/common/sampling.glsl and the box."""
+    return {"u_extent": tuple(volume.extent), "u_dims": tuple(float(n) for n in volume.dims),
+            "u_spacing": tuple(volume.spacing)}
+
+
+def tf_uniforms(lut, tf):
+    """Uniforms of shaders/common/classification.glsl and opacity correction."""
+    return {"u_tf_lo": lut.lo, "u_tf_scale": lut.scale, "u_tf_size": lut.size,
+            "u_inv_unit": 1.0 / tf.unit_distance}
+
+
+def preintegration_uniforms(table):
+    """Uniforms of shaders/common/preintegration.glsl."""
+    return {"u_pi_lo": table.lo, "u_pi_scale": table.scale, "u_pi_size": table.size}
+
+
+def bind(prog, textures, uniforms):
+    """Bind ``textures`` (sampler name -> texture) to consecutive units and set the
+    uniforms the program has (the compiler drops those a variant does not use)."""
+    for unit, (name, tex) in enumerate(textures.items()):
+        tex.use(location=unit)
+        if name in prog:
+            prog[name].value = unit
+    for name, value in uniforms.items():
+        if name in prog:
+            prog[name].value = value
+
+
+def eye_view_projection(scene, near, far):
+    """View-projection matrix (float64, row-vector convention as pyrr writes it) for
+    box-relative positions, perspective or orthographic as the camera is, with the given
+    near and far distances along the view direction."""
+    import pyrr
+    cam = scene.camera
+    lo, _ = scene.volume.bounds
+    eye = cam.eye - lo
+    hx, hy = cam.screen_scale(scene.width, scene.height)
+    if cam.is_ortho:
+        proj = pyrr.matrix44.create_orthogonal_projection(-hx, hx, -hy, hy, near, far, dtype=np.float64)
+    else:
+        proj = pyrr.matrix44.create_perspective_projection(cam.fov, scene.width / scene.height, near, far,
+                                                           dtype=np.float64)
+    view = pyrr.matrix44.create_look_at(eye, eye + cam.forward, cam.true_up, dtype=np.float64)
+    return view @ proj
+
+
+def box_depth_range(scene):
+    """Smallest and largest depth (distance along the view direction from the eye) of
+    the volume box's corners."""
+    cam = scene.camera
+    lo, _ = scene.volume.bounds
+    extent = scene.volume.extent
+    corners = np.array([[x, y, z] for z in (0, 1) for y in (0, 1) for x in (0, 1)]) * extent
+    depth = (corners - (cam.eye - lo)) @ cam.forward
+    return float(depth.min()), float(depth.max())
+
+
+
+def box_proxy(scene):
+    """The geometry that makes one fragment per pixel the volume box covers:
+    ("box", model-view-projection of the unit cube's back faces) or, with the eye inside
+    or nearly on the box, ("fullscreen", identity) for one full-screen triangle."""
+    import pyrr
+    cam = scene.camera
+    lo, _ = scene.volume.bounds
+    extent = scene.volume.extent
+    eye = cam.eye - lo
+    dmin, dmax = box_depth_range(scene)
+    margin = 1e-3 * float(np.linalg.norm(extent))
+    if cam.is_ortho:
+        near, far = dmin - margin, dmax + margin
+    else:
+        gap = np.maximum(np.maximum(-eye, eye - extent), 0.0)
+        distance = float(np.linalg.norm(gap))
+        if distance < margin:
+            return "fullscreen", np.eye(4)
+        # Every exit point is at least `distance` from the eye and within the view's
+        # diagonal half-angle of the axis, so this near plane never clips a back face.
+        hx, hy = cam.screen_scale(scene.width, scene.height)
+        near = 0.5 * distance / math.sqrt(1.0 + hx * hx + hy * hy)
+        far = dmax * 1.01 + margin
+    model = pyrr.matrix44.create_from_scale(extent, dtype=np.float64)
+    return "box", model @ eye_view_projection(scene, near, far)

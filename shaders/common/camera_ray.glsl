@@ -1,0 +1,31 @@
+// The ray through the centre of this fragment's pixel (NumPy twin: scene.Camera.rays),
+// with positions relative to the volume box's lower corner.
+#ifndef DVR_CAMERA_RAY_GLSL
+#define DVR_CAMERA_RAY_GLSL
+
+#ifndef ORTHO
+#define ORTHO 0
+#endif
+
+uniform vec2 u_viewport;      // image width, height in pixels
+uniform vec3 u_eye;           // eye, relative to the box's lower corner
+uniform vec3 u_right;         // camera basis (world)
+uniform vec3 u_up;
+uniform vec3 u_forward;
+uniform vec2 u_screen;        // half extent of the view: at unit distance, or world (ortho)
+
+// Perspective rays start at the eye; orthographic ones on the plane through the eye
+// normal to the view. `dir` is a unit vector.
+void pixelRay(out vec3 origin, out vec3 dir) {
+    vec2 ndc = gl_FragCoord.xy * (2.0 / u_viewport) - 1.0;
+    vec3 offset = (ndc.x * u_screen.x) * u_right + (ndc.y * u_screen.y) * u_up;
+#if ORTHO
+    origin = u_eye + offset;
+    dir = u_forward;
+#else
+    origin = u_eye;
+    dir = normalize(u_forward + offset);
+#endif
+}
+
+#endif
