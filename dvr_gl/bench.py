@@ -45,7 +45,9 @@ from .io import atomic_write
 from .scene import Camera, Scene, TransferFunction, Volume
 
 STEPS_VOXELS = (1.0, 0.5, 0.25)
-DEFAULT_DATA_DIR = "/work/shared/data"
+# the project's shared data folder beside the checkout (override with $DVR_GL_DATA)
+DEFAULT_DATA_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))),
+                                "shared", "data")
 CHEST_FILE = os.path.join("vtkjs_lidc2_ct", "LIDC2_256x256x133_uint8.raw.gz")
 
 RENDERERS = (  # (label, kind, skip_empty)
@@ -247,8 +249,7 @@ def run(args, err=sys.stderr):
     info = {}
     try:
         with dvr_gl.Renderer(backend=args.backend) as gl:
-            with gl.ctx:
-                info["dvr_gl"] = gl.info()
+            info["dvr_gl"] = gl.info()
             if peer is not None:
                 info["vtk"] = {"renderer": peer.renderer_string(), "version": _vtk_version(),
                                "data_as_float": bool(args.vtk_float)}
@@ -283,6 +284,111 @@ def run(args, err=sys.stderr):
     info.update(_machine(), size=size, repeats=args.repeats, steps_voxels=steps,
                 datasets=[n for n, *_ in sets], vtk_note=vtk_note)
     return rows, info
+
+
+# -- the slicing suite ---------------------------------------------------------------------
+SLICE_INTERPOLATE = (0, 1, 3)
+
+
+def slicing_configs(interpolate=SLICE_INTERPOLATE):
+    """(label, technique, options, k) for each renderer of the slicing suite; every
+    sample distance d_k = spacing along the stack axis / (k + 1) is shared by slice2d
+    with k, both slice3d proxies and the ray caster, each with and without
+    pre-integration."""
+    out = []
+    for k in interpolate:
+        for pre in (False, True):
+            tail = " +pre" if pre else ""
+            opts = {"preintegrate": True} if pre else {}
+            out.append((f"slice2d k={k}{tail}", "slice2d", dict(opts, interpolate=k), k))
+            out.append((f"slice3d cpu{tail}", "slice3d", dict(opts, proxy="cpu"), k))
+            out.append((f"slice3d vertex{tail}", "slice3d", dict(opts, proxy="vertex"), k))
+            out.append((f"raycast{tail}", "raycast", dict(opts), k))
+    return out
+
+
+def run_slicing(args, err=sys.stderr):
+    """Frame time and error against exact of the slicing techniques beside the ray caster
+    at equal sample distance, on the same data sets and cameras as the peer suite.
+    Returns (rows, info); rows carry ``time_vs_raycast`` and ``rmse_vs_raycast`` (the
+    post-classified ray caster at the same distance)."""
+    import dvr_gl
+    from .reference.exact import exact as exact_image
+    from .techniques.slice2d import stack_axis
+
+    size = args.size
+    names = [n.strip() for n in args.datasets.split(",") if n.strip()]
+    sets = []
+    for name in names:
+        try:
+            sets.extend(datasets([name], chest_path=args.chest))
+        except FileNotFoundError as e:
+            print(f"dvr-gl bench: skipping {name}: {e}", file=err)
+    if not sets:
+        raise SystemExit("dvr-gl bench: no data set could be loaded")
+    configs = slicing_configs()
+    ks = sorted({c[3] for c in configs})
+    frames = 1 + args.repeats
+    progress = Progress(len(sets) * (1 + len(configs) * frames), stream=err)
+    rows, info = [], {}
+    try:
+        with dvr_gl.Renderer(backend=args.backend) as gl:
+            info["dvr_gl"] = gl.info()
+            for name, volume, tf, camera in sets:
+                scene = Scene(volume, tf, camera, width=size, height=size)
+                progress.begin(f"{name}: exact image")
+                exact = exact_image(scene)
+                progress.advance(f"{name}: exact image")
+                axis_spacing = float(volume.spacing[stack_axis(camera.forward)])
+                for k in ks:
+                    distance = axis_spacing / (k + 1)
+                    group = [c for c in configs if c[3] == k]
+                    calls = []
+                    for label, technique, opts, _ in group:
+                        step = {} if technique == "slice2d" else {"step": distance}
+                        calls.append(functools.partial(gl.render, scene, technique=technique, **step, **opts))
+                    images, times = interleaved_frames(
+                        calls, args.repeats,
+                        lambda j, i: progress.advance(
+                            f"{name} d={distance:.3g}: {group[j][0]} "
+                            + ("warm-up" if i < 0 else f"frame {i + 1}/{args.repeats}")))
+                    for (label, technique, opts, _), image, ts in zip(group, images, times):
+                        row = _row(name, scene, label, technique, None, distance / volume.min_spacing,
+                                   distance, ts, metrics.compare(image, exact))
+                        row["interpolate"] = k
+                        row["preintegrate"] = bool(opts.get("preintegrate"))
+                        rows.append(row)
+    finally:
+        progress.close()
+    base = {(r["dataset"], r["interpolate"]): r for r in rows if r["renderer"] == "raycast"}
+    for r in rows:
+        b = base.get((r["dataset"], r["interpolate"]))
+        r["time_vs_raycast"] = r["ms_median"] / b["ms_median"] if b else None
+        r["rmse_vs_raycast"] = r["rmse"] / b["rmse"] if b and b["rmse"] > 0 else None
+    info.update(_machine(), size=size, repeats=args.repeats, suite="slicing",
+                datasets=[n for n, *_ in sets])
+    return rows, info
+
+
+def format_slicing_table(rows):
+    head = ("data", "distance (voxel)", "renderer", "ms/frame", "RMSE", "max err", "PSNR dB", "t/raycast",
+            "err/raycast")
+    lines = [(r["dataset"], f"{r['step_voxels']:.3g}", r["renderer"], _fmt(r["ms_median"], ".1f"),
+              _fmt(r["rmse"], ".2e"), _fmt(r["max_abs"], ".3f"), _fmt(r["psnr"], ".1f"),
+              _fmt(r["time_vs_raycast"], ".2f"), _fmt(r["rmse_vs_raycast"], ".2f")) for r in rows]
+    widths = [max(len(h), *(len(l[i]) for l in lines)) if lines else len(h) for i, h in enumerate(head)]
+
+    def fmt_line(cells):
+        return "  ".join(c.ljust(w) if i in (0, 2) else c.rjust(w) for i, (c, w) in enumerate(zip(cells, widths)))
+
+    out = [fmt_line(head), fmt_line(["-" * w for w in widths])]
+    prev = None
+    for r, l in zip(rows, lines):
+        if prev is not None and (r["dataset"], r["interpolate"]) != prev:
+            out.append("")
+        prev = (r["dataset"], r["interpolate"])
+        out.append(fmt_line(l))
+    return "\n".join(out)
 
 
 def equal_error_and_time(rows):
@@ -417,14 +523,19 @@ def output_paths(out):
     return p.with_suffix(".csv"), p.with_suffix(".json"), p.with_suffix(".png")
 
 
-def write_results(rows, info, out):
+SLICING_CSV_FIELDS = ("dataset", "width", "height", "renderer", "kind", "interpolate", "preintegrate",
+                      "step_voxels", "step_world", "ms_median", "ms_min", "ms_max", "rmse", "max_abs",
+                      "psnr", "time_vs_raycast", "rmse_vs_raycast")
+
+
+def write_results(rows, info, out, fields=CSV_FIELDS):
     csv_path, json_path, png_path = output_paths(out)
     csv_path.parent.mkdir(parents=True, exist_ok=True)
     buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=CSV_FIELDS, extrasaction="ignore", lineterminator="\n")
+    w = csv.DictWriter(buf, fieldnames=fields, extrasaction="ignore", lineterminator="\n")
     w.writeheader()
     for r in rows:
-        w.writerow({k: ("" if r[k] is None else r[k]) for k in CSV_FIELDS})
+        w.writerow({k: ("" if r[k] is None else r[k]) for k in fields})
     atomic_write(csv_path, buf.getvalue().encode())
 
     def clean(v):
@@ -489,6 +600,10 @@ def add_arguments(parser):
     parser.add_argument("--no-vtk", action="store_true", help="leave VTK out")
     parser.add_argument("--textures", action="store_true",
                         help="also measure trilinear sampling throughput of float32, float16 and unorm8 textures")
+    parser.add_argument("--suite", choices=("peer", "slicing"), default="peer",
+                        help="peer: the ray caster beside VTK (default); slicing: slice2d (k = 0, 1, 3), "
+                             "slice3d (cpu and vertex proxies) and the ray caster at equal sample "
+                             "distance, each with and without pre-integration")
     parser.add_argument("--vtk-float", action="store_true",
                         help="give VTK the samples as float32 instead of their own type")
     return parser
@@ -510,6 +625,16 @@ def run_bench(args) -> int:
     if not steps or any(not (s > 0 and math.isfinite(s)) for s in steps):
         print(f"dvr-gl bench: --steps must be positive, got {args.steps!r}", file=sys.stderr)
         return 2
+    if args.suite == "slicing":
+        rows, info = run_slicing(args)
+        print(f"dvr_gl: {info['dvr_gl'].get('renderer')} ({info['dvr_gl'].get('backend')}); "
+              f"{info['size']}x{info['size']}, median of {info['repeats']} frames; t/raycast and "
+              f"err/raycast divide by the post-classified ray caster at the same distance")
+        print(format_slicing_table(rows))
+        if args.out:
+            paths = write_results(rows, info, args.out, fields=SLICING_CSV_FIELDS)
+            print("wrote " + ", ".join(str(p) for p in paths))
+        return 0
     rows, info = run(args)
     print(f"dvr_gl: {info['dvr_gl'].get('renderer')} ({info['dvr_gl'].get('backend')}); "
           f"VTK: {info['vtk']['renderer'] + ' (VTK ' + str(info['vtk']['version']) + ')' if 'vtk' in info else 'not run'}; "

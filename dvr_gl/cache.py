@@ -5,9 +5,12 @@ from __future__ import annotations
 from collections import OrderedDict
 
 
+_BY_VALUE = (str, int, float)  # plain values (a kind, a step) compare by value
+
+
 class IdentityKey:
-    """Hashable by the identity of the objects it holds; holding them keeps ``id``s from
-    being reused while the entry lives."""
+    """Hashable by the identity of the objects it holds (plain strings and numbers by
+    value); holding them keeps ``id``s from being reused while the entry lives."""
 
     __slots__ = ("objects",)
 
@@ -15,11 +18,12 @@ class IdentityKey:
         self.objects = objects
 
     def __hash__(self):
-        return hash(tuple(id(o) if not isinstance(o, str) else o for o in self.objects))
+        return hash(tuple((type(o).__name__, o) if isinstance(o, _BY_VALUE) else id(o) for o in self.objects))
 
     def __eq__(self, other):
         return (isinstance(other, IdentityKey) and len(other.objects) == len(self.objects)
-                and all(a is b or (isinstance(a, str) and a == b) for a, b in zip(self.objects, other.objects)))
+                and all(a is b or (isinstance(a, _BY_VALUE) and type(a) is type(b) and a == b)
+                        for a, b in zip(self.objects, other.objects)))
 
 
 class LRU:

@@ -90,6 +90,16 @@ def _number(text):
     return _finite(text)
 
 
+def _count(text):
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a whole number, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be 0 or more, got {value}")
+    return value
+
+
 def _positive(text):
     return _finite(text, positive=True)
 
@@ -112,33 +122,29 @@ _background = _arg_type(_background_value, "background")
 
 # ----------------------------------------------------------------------------- the parser
 
-def build_parser(bench_module=None):
-    """The argument parser; ``bench_module`` (dvr_gl.bench, if loaded) adds its options."""
-    from . import __version__
-
-    parser = argparse.ArgumentParser(
-        prog=PROG, description="Direct volume rendering with OpenGL, headless (EGL or OSMesa).")
-    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    sub.required = True
-
-    sub.add_parser("info", help="list the GL backends, their renderer, version and limits",
-                   description="Try each headless GL backend and print what it offers.")
-
-    r = sub.add_parser(
-        "render", help="render a volume to a PNG",
-        description="Render a volume to a PNG. INPUT is a volume file (.npy, .npz, .nrrd, .nhdr, "
-                    ".mhd, .mha; any other name is raw samples and needs --shape, --dtype and "
-                    "--spacing) or a bundled data set: builtin:ct_head, builtin:synthetic.")
+def add_render_options(r):
+    """The options shared by ``render`` and ``view``: the input, its geometry, the transfer
+    function, the technique and its options, the mode, the camera and the image size."""
     r.add_argument("input", metavar="INPUT", help="volume file or builtin:NAME")
-    r.add_argument("--out", "-o", required=True, metavar="IMAGE.png", help="the PNG to write")
     r.add_argument("--tf", metavar="PRESET|FILE.json",
                    help=f"transfer function: a preset ({', '.join(PRESETS)}) or a JSON file "
                         "{\"color\": [[s, r, g, b], ...], \"opacity\": [[s, a], ...], \"unit_distance\": u}; "
                         "default: auto (the data set's own for builtin inputs)")
-    r.add_argument("--technique", default="raycast", help="rendering technique (default: raycast)")
+    r.add_argument("--technique", default="raycast",
+                   help="rendering technique: raycast, slice2d or slice3d (default: raycast)")
     r.add_argument("--step", type=_positive, metavar="S",
-                   help="sampling step in world units (default: the renderer's)")
+                   help="sampling step (slice distance for slice3d) in world units (default: half "
+                        "the smallest spacing; slice2d takes none, see --interpolate)")
+    r.add_argument("--preintegrate", action="store_true",
+                   help="pre-integrated classification of whole segments (composite mode)")
+    r.add_argument("--interpolate", type=_count, metavar="K",
+                   help="slice2d: K intermediate slices per cell (default: 0)")
+    r.add_argument("--proxy", choices=("cpu", "vertex"),
+                   help="slice3d: slice polygons made on the CPU or in the vertex shader (default: cpu)")
+    r.add_argument("--shells", action="store_true",
+                   help="slice3d: slice along spherical shells around the eye instead of planes")
+    r.add_argument("--target", choices=("rgba32f", "rgba16f", "rgba8"),
+                   help="render target format (default: rgba32f)")
     r.add_argument("--mode", choices=MODES,
                    help="optical model (default: composite, or isosurface when --iso is given)")
     r.add_argument("--iso", type=_number, metavar="V", help="iso-value for --mode isosurface (data units)")
@@ -166,9 +172,56 @@ def build_parser(bench_module=None):
     r.add_argument("--backend", choices=("auto", "egl", "osmesa"), default="auto",
                    help="headless GL backend (default: auto, EGL then OSMesa)")
 
+
+# which technique takes which option
+TECHNIQUE_OPTIONS = {"interpolate": ("slice2d",), "proxy": ("slice3d",), "shells": ("slice3d",)}
+
+
+def technique_options(args):
+    """The keyword arguments for ``Renderer.render`` from parsed render options; an option
+    the chosen technique does not take is a usage error naming it."""
+    kwargs = {"technique": args.technique}
+    for name in ("step", "preintegrate", "interpolate", "proxy", "shells", "target"):
+        value = getattr(args, name, None)
+        if value is None or value is False:
+            continue
+        takers = TECHNIQUE_OPTIONS.get(name)
+        if takers is not None and args.technique not in takers:
+            raise UsageError(f"--{name}", f"applies to --technique {' or '.join(takers)} only, "
+                                          f"not {args.technique}")
+        if name == "step" and args.technique == "slice2d":
+            raise UsageError("--step", "slice2d's slice distance is fixed by the data "
+                                       "(spacing / (interpolate + 1)); use --interpolate K")
+        kwargs[name] = value
+    return kwargs
+
+
+def build_parser(bench_module=None):
+    """The argument parser; ``bench_module`` (dvr_gl.bench, if loaded) adds its options."""
+    from . import __version__
+
+    parser = argparse.ArgumentParser(
+        prog=PROG, description="Direct volume rendering with OpenGL, headless (EGL or OSMesa).")
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub.required = True
+
+    sub.add_parser("info", help="list the GL backends, their renderer, version and limits",
+                   description="Try each headless GL backend and print what it offers.")
+
+    r = sub.add_parser(
+        "render", help="render a volume to a PNG",
+        description="Render a volume to a PNG. INPUT is a volume file (.npy, .npz, .nrrd, .nhdr, "
+                    ".mhd, .mha; any other name is raw samples and needs --shape, --dtype and "
+                    "--spacing) or a bundled data set: builtin:ct_head, builtin:synthetic.")
+    r.add_argument("--out", "-o", required=True, metavar="IMAGE.png", help="the PNG to write")
+    add_render_options(r)
+
     d = sub.add_parser("demo", help="render the bundled demo scenes to PNGs",
                        description="Render the bundled demo scenes into a folder.")
     d.add_argument("--out-dir", metavar="DIR", help="folder for the images (default: the demo's own, dvr-gl-demo)")
+    d.add_argument("--preintegrate", action="store_true",
+                   help="render the composite scenes with pre-integrated classification")
 
     b = sub.add_parser("bench", help="time the techniques", description="Time the techniques.")
     if bench_module is not None:
@@ -309,6 +362,7 @@ def cmd_render(args, out=None):
 
     _check_out(args.out)
     _check_technique(args.technique)
+    render_kwargs = technique_options(args)
     mode = args.mode or ("isosurface" if args.iso is not None else "composite")
     if mode == "isosurface" and args.iso is None:
         raise UsageError("--iso", "an iso-value is required with --mode isosurface")
@@ -331,9 +385,6 @@ def cmd_render(args, out=None):
 
     import dvr_gl
     renderer_kwargs = {"backend": args.backend}
-    render_kwargs = {"technique": args.technique}
-    if args.step is not None:
-        render_kwargs["step"] = args.step
     t1 = time.perf_counter()
     with dvr_gl.Renderer(**renderer_kwargs) as renderer:
         t2 = time.perf_counter()
@@ -348,6 +399,9 @@ def cmd_render(args, out=None):
     view = f"azimuth {args.azimuth:g}, elevation {args.elevation:g}, zoom {args.zoom:g}"
     view += ", orthographic" if args.ortho else f", fov {args.fov:g}"
     step = f"step {args.step:g}" if args.step is not None else "default step"
+    extras = [f"{k} {v}" if not isinstance(v, bool) else k for k, v in render_kwargs.items()
+              if k not in ("technique", "step")]
+    step += "".join(", " + e for e in extras)
     print(f"volume     {args.input}: {nx}x{ny}x{nz} (x, y, z) {volume.data.dtype}, spacing {sx:g},{sy:g},{sz:g}, "
           f"values {lo:g}..{hi:g}", file=out)
     print(f"transfer   {_describe_tf(tf_name, tf)}", file=out)
@@ -376,6 +430,8 @@ def cmd_demo(args):
         print(f"{PROG} demo: the demo is not available yet", file=sys.stderr)
         return 2
     kwargs = {} if args.out_dir is None else {"out_dir": args.out_dir}
+    if args.preintegrate:
+        kwargs["preintegrate"] = True
     return int(demo.run_demo(**kwargs) or 0)
 
 

@@ -1,5 +1,5 @@
-"""``dvr-gl demo``: built-in scenes through every available technique, a gallery PNG, and
-a table of frame time and error against the exact image."""
+"""``dvr-gl demo``: built-in scenes through every technique that can render them, a gallery
+PNG, and a table of frame time and error against the exact image."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ import numpy as np
 
 from . import data, metrics, reference
 from .scene import Camera, Scene, default_camera
-from .techniques import names as technique_names
+from .techniques import for_scene
 
 TILE = 192  # pixels; small enough that the exact images take seconds, not minutes
 
@@ -41,17 +41,17 @@ def demo_scenes(size=TILE):
     ]
 
 
-def _time_frames(renderer, scene, technique, repeats=5):
-    renderer.render(scene, technique=technique)  # compile and upload
+def _time_frames(renderer, scene, technique, repeats=5, **options):
+    renderer.render(scene, technique=technique, **options)  # compile and upload
     times = []
     for _ in range(repeats):
         t = time.perf_counter()
-        image = renderer.render(scene, technique=technique)  # read back: GL has finished
+        image = renderer.render(scene, technique=technique, **options)  # read back: GL has finished
         times.append(time.perf_counter() - t)
     return image, statistics.median(times)
 
 
-def run_demo(out_dir="dvr-gl-demo") -> int:
+def run_demo(out_dir="dvr-gl-demo", preintegrate=False) -> int:
     from .io import save_png
     from .renderer import Renderer
 
@@ -63,8 +63,9 @@ def run_demo(out_dir="dvr-gl-demo") -> int:
               f"LP_NUM_THREADS={os.environ.get('LP_NUM_THREADS', 'unset (all cores)')}")
         for title, scene in demo_scenes():
             exact = reference.exact(scene)
-            for technique in technique_names():
-                image, seconds = _time_frames(renderer, scene, technique)
+            for technique in for_scene(scene):
+                options = {"preintegrate": True} if preintegrate and scene.mode == "composite" else {}
+                image, seconds = _time_frames(renderer, scene, technique, **options)
                 err = metrics.compare(image, exact)
                 rows.append((title, technique, seconds * 1e3, err["rmse"], err["max_abs"], err["psnr"]))
                 tiles.append((f"{title} ({technique})", image))

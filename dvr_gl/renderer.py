@@ -40,6 +40,9 @@ class Renderer:
         self._occupancy = LRU(4)
         self._masks = LRU(2)
         self._small = {}
+        self._stacks = LRU(3)
+        self._preint = LRU(2)
+        self._streams = {}
         self._targets = LRU(3)
         self._vbos = {}
         self._vaos = {}
@@ -59,9 +62,11 @@ class Renderer:
             return
         self._released = True
         with current(self.ctx):
-            for cache in (self._volumes, self._tfs, self._occupancy, self._masks, self._targets):
+            for cache in (self._volumes, self._tfs, self._occupancy, self._masks, self._targets, self._stacks,
+                          self._preint):
                 cache.release()
-            for obj in list(self._small.values()) + list(self._vaos.values()) + list(self._vbos.values()):
+            streams = [obj for pair in self._streams.values() for obj in pair[1:]]
+            for obj in list(self._small.values()) + list(self._vaos.values()) + list(self._vbos.values()) + streams:
                 obj.release()
             self._idle_fbo.use()
             self.programs.release()
@@ -124,6 +129,30 @@ class Renderer:
             return tex
         return self._tfs.get(_Key(lut, "texture"), make)
 
+    def stack_texture(self, volume, axis):
+        """2-D slicing's stack along ``axis`` (0 = x, 1 = y, 2 = z): a texture array with one
+        float32 layer per sample plane, each layer the plane's samples with the lower of
+        the other two axes varying fastest. Made when a view first needs it, then kept."""
+        def make():
+            values = volume.values(np.float32)  # (z, y, x)
+            layers = {0: values.transpose(2, 0, 1), 1: values.transpose(1, 0, 2), 2: values}[axis]
+            layers = np.ascontiguousarray(layers)  # (layer, v, u)
+            n, h, w = layers.shape
+            tex = self.ctx.texture_array((w, h, n), 1, layers.tobytes(), dtype="f4")
+            tex.filter = (self.ctx.LINEAR, self.ctx.LINEAR)
+            tex.repeat_x = tex.repeat_y = False
+            self.created.append(("stack", (axis, n, h, w)))
+            return tex
+        return self._stacks.get(_Key(volume, axis), make)
+
+    def preintegration_texture(self, table):
+        def make():
+            tex = self.ctx.texture((table.size, table.size), 4, table.texture_bytes(), dtype="f4")
+            tex.filter = (self.ctx.NEAREST, self.ctx.NEAREST)
+            self.created.append(("preintegration", (table.size, table.size)))
+            return tex
+        return self._preint.get(_Key(table), make)
+
     def small_texture(self, kind, table):
         """A 2-D float32 table (jitter offsets), re-uploaded only when its values change."""
         key = (kind, table.shape, table.tobytes())
@@ -157,6 +186,37 @@ class Renderer:
         if vao is None:
             vao = self._vaos[key] = self.ctx.vertex_array(prog, [(vbo, "3f", "a_position")])
         return vao
+
+
+    def empty_vao(self, prog):
+        """A vertex array without attributes (vertex shaders that place vertices by
+        gl_VertexID and gl_InstanceID)."""
+        key = (prog.glo, "empty")
+        vao = self._vaos.get(key)
+        if vao is None:
+            vao = self._vaos[key] = self.ctx.vertex_array(prog, [])
+        return vao
+
+    def stream_vao(self, prog, name, positions, indices):
+        """A vertex array of per-frame geometry: float32 positions (n, 3) and int32 indices
+        (n,) as attributes a_position and a_slice. The buffer is rewritten each frame
+        and grows (never shrinks) as needed."""
+        data = np.empty(len(positions), dtype=[("p", "f4", 3), ("i", "i4")])
+        data["p"] = positions
+        data["i"] = indices
+        raw = data.tobytes()
+        entry = self._streams.get(name)
+        if entry is not None and (entry[1].size < len(raw) or entry[0] != prog.glo):
+            entry[2].release()
+            entry[1].release()
+            entry = None
+        if entry is None:
+            vbo = self.ctx.buffer(reserve=max(2 * len(raw), 1 << 16), dynamic=True)
+            vao = self.ctx.vertex_array(prog, [(vbo, "3f 1i", "a_position", "a_slice")])
+            self._streams[name] = entry = (prog.glo, vbo, vao)
+        entry[1].write(raw)
+        entry[2].vertices = len(positions)
+        return entry[2]
 
 
 class _Target:

@@ -17,7 +17,7 @@ from dvr_gl import data
 from dvr_gl.io import (InputError, MissingFileError, load_volume, parse_size, parse_triplet, save_png,
                        to_png_array)
 
-SHARED = "/work/shared/data"
+SHARED = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), os.pardir, "shared", "data")
 HEADSQ = os.path.join(SHARED, "vtk_headsq_quarter")
 LIDC = os.path.join(SHARED, "vtkjs_lidc2_ct")
 HEADMR = os.path.join(SHARED, "vtk_headmr")

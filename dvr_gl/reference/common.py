@@ -89,3 +89,31 @@ def composite_front_to_back(color_acc, alpha_acc, rgb, alpha):
     returns the new (colour, accumulated opacity)."""
     weight = (1 - alpha_acc) * alpha
     return color_acc + weight[..., None] * rgb, alpha_acc + weight
+
+
+def blend_over(dst, src, target="rgba32f"):
+    """Fixed-function blending ``ONE, ONE_MINUS_SRC_ALPHA`` of premultiplied ``src``
+    (..., 4) onto ``dst`` drawn behind it, as a render target of format ``target`` stores
+    it (the slicing techniques' twin of GL blending). A float32 target is modelled in
+    float64; lower-precision targets round the fragment's output and the blended result
+    to their format each time, which is where slicing's banding comes from."""
+    if target == "rgba32f":
+        return src + (1 - src[..., 3:4]) * dst
+    src = round_to_target(src, target)
+    return round_to_target(src + (1 - src[..., 3:4]) * dst, target)
+
+
+def round_to_target(x, target):
+    """What a render target of format ``target`` stores for the float values ``x``.
+
+    unorm8: clamp to [0, 1], round to the nearest multiple of 1/255. float16: llvmpipe
+    converts by truncation toward zero (not to nearest), so this does the same."""
+    x = np.asarray(x, np.float64)
+    if target == "rgba8":
+        return np.round(np.clip(x, 0, 1) * 255) / 255
+    if target == "rgba16f":
+        h = x.astype(np.float32).astype(np.float16)
+        over = np.abs(h.astype(np.float64)) > np.abs(x.astype(np.float32).astype(np.float64))
+        h = np.where(over, np.nextafter(h, np.float16(0)), h)
+        return h.astype(np.float64)
+    return x

@@ -90,6 +90,8 @@ def render_plan(plan, lut_exact=False):
     above_prev = np.zeros(m, bool)
     t_prev = t0.copy()
     t_hit = np.full(m, -1.0)
+    s_front = np.zeros(m)          # pre-integration: the field at each ray's segment start
+    have_front = np.zeros(m, bool)
 
     for k in range(-1, plan.max_segments):
         a = np.maximum(t0 + (jitter + k) * step, t0)
@@ -99,13 +101,30 @@ def render_plan(plan, lut_exact=False):
             break
         active = alive & (b - a > 0)
         if volume.has_nonfinite:
-            active &= valid(0.5 * (a + b))
+            ok = valid(0.5 * (a + b))
+            have_front[active & ~ok] = False
+            active &= ok
         rows = np.nonzero(active)[0]
         if rows.size == 0:
             continue
         a, b = a[rows], b[rows]
         length = b - a
         tm = 0.5 * (a + b)
+        if mode == "composite" and plan.preint is not None:
+            start = rows[~have_front[rows]]
+            s_front[start] = sample(a[~have_front[rows]], start)
+            s_back = sample(b, rows)
+            segment = plan.preint.segment(s_front[rows], s_back, length)
+            s_front[rows] = s_back
+            have_front[rows] = True
+            transmittance = 1 - alpha_acc[rows]  # the over operator on an associated segment
+            color[rows] += transmittance[:, None] * segment[:, :3]
+            alpha_acc[rows] += transmittance * segment[:, 3]
+            stop = alpha_acc[rows] >= 1
+            if plan.ert_transmittance > 0:
+                stop |= 1 - alpha_acc[rows] < plan.ert_transmittance
+            alive[rows[stop]] = False
+            continue
         s = sample(tm, rows)
         if mode == "composite":
             rgba = classify(s)

@@ -69,6 +69,15 @@ def tf_uniforms(lut, tf):
             "u_inv_unit": 1.0 / tf.unit_distance}
 
 
+def preintegration_table(scene, step, tables):
+    """The scene's pre-integrated table for segments ``step`` long (built once per TF,
+    value range and step)."""
+    from ..preintegration import build_table
+    volume, tf = scene.volume, scene.tf
+    return tables.get("preintegration", volume, tf, step,
+                      make=lambda v, t, length: build_table(t, v.data_range, length))
+
+
 def preintegration_uniforms(table):
     """Uniforms of shaders/common/preintegration.glsl."""
     return {"u_pi_lo": table.lo, "u_pi_scale": table.scale, "u_pi_size": table.size}

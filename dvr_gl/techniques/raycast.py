@@ -33,7 +33,13 @@ skip_empty : empty-space skipping (composite mode only). The volume is cut into 
     the texture unit cannot leave it) is classified once per transfer function. A sample
     that comes out fully transparent looks up its brick; if the brick's whole range has
     zero opacity, every midpoint in it contributes exactly nothing and the ray jumps to
-    the brick's exit. The image is identical with it on and off.
+    the brick's exit. The image is identical with it on and off. Not used with
+    pre-integration (a segment between two transparent samples may cross an opaque
+    spike, and the table's segments must stay contiguous).
+preintegrate : composite mode: classify each segment as a whole from the field at its two
+    ends with the pre-integrated table (``dvr_gl.preintegration``; its segment length is
+    the step, and the shorter first and last segments are corrected as that module
+    says) instead of one midpoint sample.
 """
 
 from __future__ import annotations
@@ -49,11 +55,13 @@ from ..reference.shading import gradient_epsilon
 from ..scene import Scene
 from ..transfer import LookupTable
 from .common import (TARGETS, bind, camera_uniforms, check_flag, check_scene, check_step, check_target,
-                     box_proxy, tf_uniforms, volume_uniforms)
+                     box_proxy, preintegration_table, preintegration_uniforms, tf_uniforms, volume_uniforms)
 
 BRICK = 8            # brick edge in cells, for empty-space skipping
 JITTER_TABLE = 64    # jitter table edge in pixels
 
+MODES = ("composite", "mip", "minip", "average", "isosurface")
+TAKES_STEP = True
 
 @dataclass
 class RaycastPlan:
@@ -65,6 +73,7 @@ class RaycastPlan:
     jitter: np.ndarray | None = None       # (64, 64) float32 in [0, 1), or None
     ert_transmittance: float = 0.0
     occupancy: np.ndarray | None = None    # (bz, by, bx) bool, or None when not skipping
+    preint: object = None                  # a preintegration.PreintegrationTable, or None
     defines: dict = field(default_factory=dict)
 
     @property
@@ -79,7 +88,7 @@ def default_step(volume):
 
 
 def make_plan(scene, step=None, *, target="rgba32f", jitter_seed=None, ert_transmittance=1e-3,
-              skip_empty=True, tables=None):
+              skip_empty=True, preintegrate=False, tables=None):
     """Validate the options and decide what the scene needs. ``tables`` (a
     ``dvr_gl.cache.TableCache``) keeps the TF's lookup table and the volume's brick
     ranges between frames."""
@@ -94,14 +103,19 @@ def make_plan(scene, step=None, *, target="rgba32f", jitter_seed=None, ert_trans
     if not 0 <= ert_transmittance < 1:
         raise ValueError(f"ert_transmittance must be in [0, 1), got {ert_transmittance!r}")
     check_flag("skip_empty", skip_empty)
+    if check_flag("preintegrate", preintegrate) and scene.mode != "composite":
+        raise ValueError(f"preintegrate applies to mode 'composite' only, got mode {scene.mode!r}")
 
     composite = scene.mode == "composite"
     lut = tables.get("lut", scene.tf, make=LookupTable)
     jitter = None
     if jitter_seed is not None:
         jitter = jitter_table(int(jitter_seed))
+    preint = None
+    if preintegrate:
+        preint = preintegration_table(scene, step, tables)
     occupancy = None
-    if skip_empty and composite:
+    if skip_empty and composite and preint is None:
         # once per volume and once per (volume, TF) respectively, never per frame
         ranges = tables.get("brick_ranges", scene.volume, make=brick_value_ranges)
         occupancy = tables.get("occupancy", scene.volume, scene.tf,
@@ -118,8 +132,10 @@ def make_plan(scene, step=None, *, target="rgba32f", jitter_seed=None, ert_trans
         defines["EARLY_RAY_TERMINATION"] = 1
     if scene.volume.has_nonfinite:
         defines["MASK_NONFINITE"] = 1
+    if preint is not None:
+        defines["PREINTEGRATE"] = 1
     return RaycastPlan(scene=scene, step=step, lut=lut, target=target, jitter=jitter,
-                       ert_transmittance=ert, occupancy=occupancy, defines=defines)
+                       ert_transmittance=ert, occupancy=occupancy, preint=preint, defines=defines)
 
 
 @functools.lru_cache(maxsize=8)
@@ -218,6 +234,9 @@ def draw(renderer, plan):
                 "u_step": plan.step, "u_max_segments": plan.max_segments}
     if plan.occupancy is not None:
         uniforms["u_brick"] = float(BRICK)
+    if plan.preint is not None:
+        textures["t_preint"] = renderer.preintegration_texture(plan.preint)
+        uniforms.update(preintegration_uniforms(plan.preint))
     if plan.ert_transmittance > 0:
         uniforms["u_ert_transmittance"] = plan.ert_transmittance
     if scene.mode == "isosurface":

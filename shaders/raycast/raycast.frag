@@ -30,12 +30,18 @@
 #ifndef MASK_NONFINITE
 #define MASK_NONFINITE 0
 #endif
+#ifndef PREINTEGRATE
+#define PREINTEGRATE 0
+#endif
 
 #include "common/camera_ray.glsl"
 #include "common/ray_box.glsl"
 #include "common/sampling.glsl"
 #include "common/classification.glsl"
 #include "common/compositing.glsl"
+#if PREINTEGRATE
+#include "common/preintegration.glsl"
+#endif
 #if MODE_ISOSURFACE
 #include "common/shading.glsl"
 #include "common/isosurface.glsl"
@@ -79,6 +85,10 @@ void main() {
 #if MODE_COMPOSITE
     vec3 color = vec3(0.0);
     float alpha_acc = 0.0;
+  #if PREINTEGRATE
+    float s_front = 0.0;      // the field at the current segment's start
+    bool have_front = false;
+  #endif
 #elif MODE_MIP
     float s_best = -1.0 / 0.0;
 #elif MODE_MINIP
@@ -105,7 +115,27 @@ void main() {
         float tm = 0.5 * (a + b);
         vec3 p = origin + tm * dir;
 #if MASK_NONFINITE
-        if (!insideValidCell(p)) continue;
+        if (!insideValidCell(p)) {
+  #if PREINTEGRATE
+            have_front = false;
+  #endif
+            continue;
+        }
+#endif
+#if MODE_COMPOSITE && PREINTEGRATE
+        // the whole segment from the field at its two ends (the end is the next start)
+        if (!have_front) s_front = sampleVolume(origin + a * dir);
+        float s_back = sampleVolume(origin + b * dir);
+        vec4 segment = preintegratedSegment(s_front, s_back, len);
+        s_front = s_back;
+        have_front = true;
+        color += (1.0 - alpha_acc) * segment.rgb;
+        alpha_acc += (1.0 - alpha_acc) * segment.a;
+  #if EARLY_RAY_TERMINATION
+        if (1.0 - alpha_acc < u_ert_transmittance) break;
+  #endif
+        if (alpha_acc >= 1.0) break;
+        continue;
 #endif
         float s = sampleVolume(p);
 #if MODE_COMPOSITE

@@ -1,0 +1,84 @@
+"""NumPy reference of 2D texture slicing: the same stack, slice order, per-fragment slabs
+and blending as ``shaders/slice2d/slice2d.frag``, in float64."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .common import blend_over, cell_is_valid, correct_opacity, ray_box, trilinear, world_to_index
+from .slice3d import _classifier
+
+
+def render_plan(plan, lut_exact=False):
+    scene = plan.scene
+    volume, cam = scene.volume, scene.camera
+    H, W = scene.height, scene.width
+    values = volume.values(np.float64)
+    lo, _ = volume.bounds
+    extent = volume.extent
+    w, (u, v) = plan.axis, plan.other_axes
+    origins, dirs = cam.rays(W, H)
+    o = (origins - lo).reshape(-1, 3)
+    d = dirs.reshape(-1, 3)
+    t0, t1 = ray_box(o, d, np.zeros(3), extent)
+    cos_theta = d @ cam.forward
+    ahead = np.where(d[:, w] > 0, 1, -1)
+    moving = d[:, w] != 0
+    classify, transparency = _classifier(plan, lut_exact)
+
+    def slice_t(j):
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return (j * plan.slice_distance - o[:, w]) / d[:, w]
+
+    def inside(j, t):
+        p = o + t[:, None] * d
+        with np.errstate(invalid="ignore"):
+            ok = (j >= 0) & (j < plan.count) & (t * cos_theta >= plan.min_depth) & moving
+            ok &= (p[:, u] >= 0) & (p[:, u] <= extent[u]) & (p[:, v] >= 0) & (p[:, v] <= extent[v])
+        return ok
+
+    def sample(j, t):
+        idx = (o + t[:, None] * d) / volume.spacing
+        idx[:, w] = j / (plan.interpolate + 1)
+        return trilinear(values, idx)
+
+    acc = np.zeros((len(o), 4))
+    for j in plan.order:  # far to near
+        j_all = np.full(len(o), j)
+        t = slice_t(j_all)
+        here = inside(j_all, t)
+        if volume.has_nonfinite:
+            p = o + np.where(here, t, 0)[:, None] * d
+            p[:, w] = j * plan.slice_distance
+            here &= cell_is_valid(volume, world_to_index(volume, p + lo))
+        rows = np.nonzero(here)[0]
+        if rows.size == 0:
+            continue
+        j_near, j_far = j - ahead, j + ahead
+        t_near, t_far = slice_t(j_near), slice_t(j_far)
+        near_in, far_in = inside(j_near, t_near)[rows], inside(j_far, t_far)[rows]
+        t_near, t_far, tj, r0, r1 = t_near[rows], t_far[rows], t[rows], t0[rows], t1[rows]
+        s = sample(j_all, t)[rows]
+        oo, dd = o[rows], d[rows]
+
+        def sample_between(tt):
+            return trilinear(values, (oo + tt[:, None] * dd) / volume.spacing)
+
+        if plan.preint is None:
+            a = np.where(near_in, 0.5 * (t_near + tj), r0)
+            b = np.where(far_in, 0.5 * (tj + t_far), r1)
+            partial = ~(near_in & far_in)
+            s = np.where(partial, sample_between(0.5 * (a + b)), s)
+            rgba = classify(s)
+            alpha = correct_opacity(rgba[:, 3], (b - a) / scene.tf.unit_distance, transparency(s))
+            src = np.concatenate([rgba[:, :3] * alpha[:, None], alpha[:, None]], axis=1)
+            src[(rgba[:, 3] <= 0) | (b <= a)] = 0
+        else:
+            t_far_all = np.where(here, slice_t(j_far), 0)
+            s_back = np.where(far_in, sample(j_far, t_far_all)[rows], sample_between(r1))
+            back = plan.preint.segment(s, s_back, np.maximum(np.where(far_in, t_far, r1) - tj, 0))
+            front = plan.preint.segment(sample_between(r0), s, np.maximum(tj - r0, 0))
+            src = np.where(near_in[:, None], back, front + (1 - front[:, 3:4]) * back)
+        src[src[:, 3] <= 0] = 0
+        acc[rows] = blend_over(acc[rows], src, plan.target)
+    return acc.reshape(H, W, 4)

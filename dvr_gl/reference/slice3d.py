@@ -1,0 +1,93 @@
+"""NumPy reference of 3D texture slicing: the same slices, per-fragment segments and
+blending order as ``shaders/slice3d/slice3d.frag``, in float64 (per-target rounding of
+the blending as ``common.blend_over`` models it). The polygons only decide which pixels
+a slice may cover; the shader's per-fragment test decides which it does, so the
+reference applies that test to every pixel."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .common import blend_over, cell_is_valid, correct_opacity, ray_box, trilinear, world_to_index
+
+
+def _classifier(plan, lut_exact):
+    tf = plan.scene.tf
+    if lut_exact:
+        return (lambda s: np.concatenate([tf.color(s), tf.opacity(s)[..., None]], axis=-1),
+                lambda s: 1 - tf.opacity(s))
+    return plan.lut.lookup, plan.lut.lookup_transparency
+
+
+def segment_colors(plan, sample, valid, a, b, lut_exact=False):
+    """Premultiplied RGBA of the segments [a, b] of the rays: a midpoint sample with
+    opacity corrected for the length, or the pre-integrated table. ``sample(t)`` and
+    ``valid(t)`` evaluate the field and the masked-cell test at ray distances ``t``."""
+    if plan.preint is not None:
+        out = plan.preint.segment(sample(a), sample(b), b - a)
+        if valid is not None:
+            out[~valid(0.5 * (a + b))] = 0
+        return out
+    classify, transparency = _classifier(plan, lut_exact)
+    tm = 0.5 * (a + b)
+    s = sample(tm)
+    rgba = classify(s)
+    alpha = correct_opacity(rgba[:, 3], (b - a) / plan.scene.tf.unit_distance, transparency(s))
+    out = np.concatenate([rgba[:, :3] * alpha[:, None], alpha[:, None]], axis=1)
+    out[rgba[:, 3] <= 0] = 0
+    if valid is not None:
+        out[~valid(tm)] = 0
+    return out
+
+
+def render_plan(plan, lut_exact=False):
+    scene = plan.scene
+    volume, cam = scene.volume, scene.camera
+    H, W = scene.height, scene.width
+    values = volume.values(np.float64)
+    lo, _ = volume.bounds
+    origins, dirs = cam.rays(W, H)
+    o = (origins - lo).reshape(-1, 3)
+    d = dirs.reshape(-1, 3)
+    t0, t1 = ray_box(o, d, np.zeros(3), volume.extent)
+    cos_theta = d @ cam.forward
+
+    def slice_t(k):
+        depth = plan.far_depth - k * plan.step
+        return np.full(len(o), depth) if plan.shells else depth / cos_theta
+
+    def inside(k, t):
+        if k < 0 or k >= plan.count:
+            return np.zeros(len(o), bool)
+        return (t > 0) & (t >= t0) & (t <= t1)
+
+    acc = np.zeros((len(o), 4))
+    for k in range(plan.count):  # far to near
+        t = slice_t(k)
+        here = inside(k, t)
+        if not here.any():
+            continue
+        rows = np.nonzero(here)[0]
+        t_near, t_far = slice_t(k + 1)[rows], slice_t(k - 1)[rows]
+        near_in, far_in = inside(k + 1, slice_t(k + 1))[rows], inside(k - 1, slice_t(k - 1))[rows]
+        tk, r0, r1 = t[rows], t0[rows], t1[rows]
+        oo, dd = o[rows], d[rows]
+
+        def sample(tt):
+            return trilinear(values, (oo + tt[:, None] * dd) / volume.spacing)
+
+        def valid_cells(tt):
+            return cell_is_valid(volume, world_to_index(volume, oo + tt[:, None] * dd + lo))
+        valid = valid_cells if volume.has_nonfinite else None
+
+        if plan.preint is None:
+            a = np.where(near_in, 0.5 * (t_near + tk), r0)
+            b = np.where(far_in, 0.5 * (tk + t_far), r1)
+            src = segment_colors(plan, sample, valid, a, b, lut_exact)
+        else:
+            src = segment_colors(plan, sample, valid, tk, np.where(far_in, t_far, r1))
+            front = segment_colors(plan, sample, valid, r0, tk)
+            src = np.where(near_in[:, None], src, front + (1 - front[:, 3:4]) * src)
+        src[src[:, 3] <= 0] = 0
+        acc[rows] = blend_over(acc[rows], src, plan.target)
+    return acc.reshape(H, W, 4)

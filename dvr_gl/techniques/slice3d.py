@@ -1,0 +1,210 @@
+"""3D texture slicing with view-aligned proxy planes.
+
+About this technique
+--------------------
+Planes perpendicular to the view direction, ``step`` apart, are cut against the volume
+box into convex polygons (3 to 6 vertices) and drawn far to near; each fragment samples
+the 3-D texture and is blended with the over operator (``ONE, ONE_MINUS_SRC_ALPHA`` on
+associated colour). The planes sit at depths ``(j + 0.5) * step`` from the eye (depth =
+distance along the view direction; for orthographic cameras from the plane through the
+eye), so they are the midplanes of slabs ``[j * step, (j + 1) * step]``. Nothing behind
+the eye is drawn: with the eye inside the box the slices start where the rays do.
+
+Per-fragment opacity correction. A pixel's ray meets plane k at ``t_k = depth_k / cos``
+(``cos`` = its direction's component along the view direction), so under perspective the
+distance between planes differs per pixel. Each fragment rebuilds its ray from
+``gl_FragCoord`` and takes the segment halfway to the neighbouring planes' points on the
+same ray; where a neighbour's point lies outside the box the segment runs to the ray's
+entry or exit instead, so the partial slabs at both ends are accounted for. The segment
+is sampled at its midpoint and its opacity corrected for its true length: the midpoint
+rule, as in ray casting, with plane-defined segment ends. A pixel whose ray crosses the
+box between two planes without meeting one inside it (a chord shorter than one step, at
+the silhouette) gets nothing.
+
+Coverage is decided by that per-fragment test, never by rasterisation: the polygons are
+cut from a box inflated by a small margin and fragments outside the true box are
+discarded. So the CPU and vertex-shader proxies, whose vertices round differently,
+produce the same image bit for bit.
+
+Options (same names in ``dvr_gl.reference.render``)
+---------------------------------------------------
+target : "rgba32f" (default) | "rgba16f" | "rgba8": blending happens in the target, so a
+    low-precision target rounds once per slice (the banding error; see the README).
+proxy : "cpu" (default): polygons computed on the CPU for all slices at once
+    (``techniques.proxy``) and drawn in one call. "vertex": each slice is 12 vertices
+    (four fan triangles over six polygon slots) placed by the vertex shader, one
+    instanced draw (Rezk-Salama and Kolb 2005).
+shells : slice along spherical shells around the eye (radii ``(j + 0.5) * step``) instead
+    of planes; every ray then meets the shells ``step`` apart. Drawn as instances of the
+    box's back faces (or a full-screen triangle with the eye inside).
+preintegrate : classify whole segments between consecutive slices with the pre-integrated
+    table (``dvr_gl.preintegration``) instead of midpoint samples.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..cache import TableCache
+from ..scene import Scene
+from ..transfer import LookupTable
+from . import proxy as proxy_geometry
+from .common import (TARGETS, bind, box_proxy, camera_uniforms, check_flag, check_scene, check_step,
+                     check_target, eye_view_projection, preintegration_table, preintegration_uniforms, tf_uniforms, volume_uniforms)
+
+PROXIES = ("cpu", "vertex")
+INFLATE = 1e-3  # proxy polygons are cut from the box grown by this fraction of its diagonal
+
+MODES = ("composite",)
+TAKES_STEP = True
+
+@dataclass
+class Slice3DPlan:
+    scene: Scene
+    step: float
+    lut: LookupTable
+    target: str = "rgba32f"
+    proxy: str = "cpu"
+    shells: bool = False
+    preint: object = None          # a preintegration.PreintegrationTable, or None
+    far_depth: float = 0.0         # depth (or radius) of slice 0; slice k is far_depth - k * step
+    count: int = 0                 # number of slices
+    defines: dict = field(default_factory=dict)
+
+    def depths(self):
+        return self.far_depth - np.arange(self.count) * self.step
+
+
+def default_step(volume):
+    """Half the smallest spacing, as for ray casting."""
+    return 0.5 * volume.min_spacing
+
+
+def make_plan(scene, step=None, *, target="rgba32f", proxy="cpu", shells=False, preintegrate=False,
+              tables=None):
+    tables = tables or TableCache()
+    check_scene(scene, "slice3d", modes=MODES)
+    volume = scene.volume
+    step = default_step(volume) if step is None else check_step(step, volume)
+    check_target(target)
+    if proxy not in PROXIES:
+        raise ValueError(f"proxy must be one of {', '.join(PROXIES)}, got {proxy!r}")
+    shells = check_flag("shells", shells)
+    preintegrate = check_flag("preintegrate", preintegrate)
+    if shells and proxy != "cpu":
+        raise ValueError(f"shells=True draws instanced box faces; proxy must be left as 'cpu', got {proxy!r}")
+    lut = tables.get("lut", scene.tf, make=LookupTable)
+    preint = preintegration_table(scene, step, tables) if preintegrate else None
+
+    cam = scene.camera
+    lo, _ = volume.bounds
+    eye = cam.eye - lo
+    if shells:
+        far_depth, count = shell_radii(volume.extent, eye, step)
+    else:
+        corners = proxy_geometry.box_corners(np.zeros(3), volume.extent)
+        far_depth, count = proxy_geometry.slice_depths(corners, cam.forward, eye, step)
+    defines = {}
+    if cam.is_ortho:
+        defines["ORTHO"] = 1
+    if shells:
+        defines["SHELLS"] = 1
+    if preint is not None:
+        defines["PREINTEGRATE"] = 1
+    if volume.has_nonfinite:
+        defines["MASK_NONFINITE"] = 1
+    return Slice3DPlan(scene=scene, step=step, lut=lut, target=target, proxy=proxy, shells=shells,
+                       preint=preint, far_depth=float(far_depth), count=int(count), defines=defines)
+
+
+def shell_radii(extent, eye, step):
+    """Radii ``(j + 0.5) * step`` of the shells that can meet the box [0, extent] as seen
+    from ``eye``: (largest radius, count), far to near."""
+    extent = np.asarray(extent, np.float64)
+    gap = np.maximum(np.maximum(-eye, eye - extent), 0.0)
+    r_min = float(np.linalg.norm(gap))
+    corners = proxy_geometry.box_corners(np.zeros(3), extent)
+    r_max = float(np.linalg.norm(corners - eye, axis=1).max())
+    j_lo = max(0, math.floor(r_min / step - 0.5))
+    j_hi = math.ceil(r_max / step - 0.5)
+    return (j_hi + 0.5) * step, j_hi - j_lo + 1
+
+
+# ---------------------------------------------------------------------------------------
+# GL path
+
+def _plane_projection(plan):
+    """View-projection whose near and far planes keep every slice."""
+    nearest = plan.far_depth - (plan.count - 1) * plan.step
+    if plan.scene.camera.is_ortho:
+        return eye_view_projection(plan.scene, 0.5 * nearest, plan.far_depth + plan.step)
+    return eye_view_projection(plan.scene, 0.5 * nearest, 2.0 * plan.far_depth + plan.step)
+
+
+def _inflated_corners(volume):
+    margin = INFLATE * float(np.linalg.norm(volume.extent))
+    return proxy_geometry.box_corners(np.full(3, -margin), volume.extent + margin)
+
+
+def draw(renderer, plan):
+    """Render the plan into the renderer's target; returns that framebuffer."""
+    ctx = renderer.ctx
+    scene = plan.scene
+    volume = scene.volume
+    cam = scene.camera
+    if plan.shells:
+        vertex_shader = "slice3d/shell.vert"
+    elif plan.proxy == "vertex":
+        vertex_shader = "slice3d/proxy_vertex.vert"
+    else:
+        vertex_shader = "common/slice_polygons.vert"
+    prog = renderer.programs.get(vertex_shader, "slice3d/slice3d.frag", plan.defines)
+
+    textures = {"t_volume": renderer.volume_texture(volume), "t_tf": renderer.tf_texture(plan.lut)}
+    uniforms = {**camera_uniforms(scene), **volume_uniforms(volume), **tf_uniforms(plan.lut, scene.tf),
+                "u_far_depth": plan.far_depth, "u_step": plan.step, "u_slice_count": plan.count}
+    if plan.preint is not None:
+        textures["t_preint"] = renderer.preintegration_texture(plan.preint)
+        uniforms.update(preintegration_uniforms(plan.preint))
+    if volume.has_nonfinite:
+        textures["t_cell_valid"] = renderer.cell_valid_texture(volume)
+    bind(prog, textures, uniforms)
+
+    fbo = renderer.target(scene.width, scene.height, TARGETS[plan.target])
+    fbo.use()
+    fbo.clear(0.0, 0.0, 0.0, 0.0)
+    if plan.count == 0:
+        return fbo
+    ctx.disable(ctx.DEPTH_TEST | ctx.CULL_FACE)
+    ctx.enable(ctx.BLEND)
+    ctx.blend_func = ctx.ONE, ctx.ONE_MINUS_SRC_ALPHA
+    ctx.blend_equation = ctx.FUNC_ADD
+    try:
+        if plan.shells:
+            kind, view_proj = box_proxy(scene)
+            prog["u_view_proj"].write(view_proj.astype("f4").tobytes())
+            if kind == "box":
+                ctx.enable(ctx.CULL_FACE)
+                ctx.cull_face = "front"
+            renderer.proxy_vao(prog, kind).render(instances=plan.count)
+        elif plan.proxy == "vertex":
+            lo, _ = volume.bounds
+            corners = _inflated_corners(volume)
+            tables = proxy_geometry.vertex_path_tables(cam.forward)
+            bind(prog, {}, {"u_corners": [tuple(c) for c in corners], "u_normal": tuple(cam.forward),
+                            **tables})
+            prog["u_view_proj"].write(_plane_projection(plan).astype("f4").tobytes())
+            renderer.empty_vao(prog).render(ctx.TRIANGLES, vertices=12, instances=plan.count)
+        else:
+            lo, _ = volume.bounds
+            offsets = plan.depths() + float(np.dot(cam.forward, cam.eye - lo))
+            vertices, counts = proxy_geometry.plane_polygons(_inflated_corners(volume), cam.forward, offsets)
+            positions, slices = proxy_geometry.fan_triangles(vertices, counts)
+            prog["u_view_proj"].write(_plane_projection(plan).astype("f4").tobytes())
+            renderer.stream_vao(prog, "slice3d_cpu", positions, slices).render(ctx.TRIANGLES)
+    finally:
+        ctx.disable(ctx.BLEND | ctx.CULL_FACE)
+    return fbo

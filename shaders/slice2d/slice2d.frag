@@ -1,0 +1,124 @@
+// 2D texture slicing: one fragment per (pixel, slice of the stack). The slice's point on
+// the pixel's ray and its neighbours' points define the slab this fragment stands for,
+// blended far to near with ONE, ONE_MINUS_SRC_ALPHA (see techniques/slice2d.py).
+#version 330 core
+
+#ifndef PREINTEGRATE
+#define PREINTEGRATE 0
+#endif
+#ifndef MASK_NONFINITE
+#define MASK_NONFINITE 0
+#endif
+
+#include "common/camera_ray.glsl"
+#include "common/ray_box.glsl"
+#include "common/sampling.glsl"
+#include "common/classification.glsl"
+#include "common/compositing.glsl"
+#if PREINTEGRATE
+#include "common/preintegration.glsl"
+#endif
+
+uniform sampler2DArray t_stack;  // one float32 layer per sample plane along the axis
+uniform vec3 u_extent;           // box size; the box is [0, u_extent]
+uniform ivec3 u_axes;            // stack axis w, then the other two (u lower, v higher)
+uniform float u_slice_distance;  // between slices along the axis
+uniform int u_slice_count;
+uniform int u_per_cell;          // slices per cell: interpolate + 1
+uniform float u_min_depth;       // nearer points are not drawn (GL clips them)
+uniform float u_inv_unit;        // 1 / transfer-function unit distance
+
+flat in int v_slice;
+out vec4 f_color;
+
+// Ray distance of slice j's plane. Neighbours call this with j +- 1 and get exactly what
+// that slice's own fragments compute, so slabs tile the ray without gaps.
+float sliceT(int j, vec3 origin, vec3 dir) {
+    return (float(j) * u_slice_distance - origin[u_axes.x]) / dir[u_axes.x];
+}
+
+// Does slice j exist, with its point on this ray inside its rectangle and drawn?
+bool sliceInside(int j, float t, vec3 origin, vec3 dir, float cos_theta) {
+    if (j < 0 || j >= u_slice_count || t * cos_theta < u_min_depth) return false;
+    vec3 p = origin + t * dir;
+    float pu = p[u_axes.y], pv = p[u_axes.z];
+    return pu >= 0.0 && pu <= u_extent[u_axes.y] && pv >= 0.0 && pv <= u_extent[u_axes.z];
+}
+
+// The field at slice j's point: bilinear in the layer, linear between two layers for an
+// intermediate slice.
+float sampleSlice(int j, float t, vec3 origin, vec3 dir) {
+    vec3 p = origin + t * dir;
+    vec2 uv = (vec2(p[u_axes.y] / u_spacing[u_axes.y], p[u_axes.z] / u_spacing[u_axes.z]) + 0.5)
+              / vec2(u_dims[u_axes.y], u_dims[u_axes.z]);
+    int layer = j / u_per_cell;
+    int rest = j - layer * u_per_cell;
+    float s = texture(t_stack, vec3(uv, float(layer))).r;
+    if (rest > 0) {
+        float f = float(rest) / float(u_per_cell);
+        s = s * (1.0 - f) + texture(t_stack, vec3(uv, float(layer + 1))).r * f;
+    }
+    return s;
+}
+
+// The field at any point of the box, from the two layers around it (the partial slabs
+// at the box entry and exit are sampled at their midpoints this way).
+float sampleBetween(vec3 p) {
+    vec2 uv = (vec2(p[u_axes.y] / u_spacing[u_axes.y], p[u_axes.z] / u_spacing[u_axes.z]) + 0.5)
+              / vec2(u_dims[u_axes.y], u_dims[u_axes.z]);
+    float x = clamp(p[u_axes.x] / u_spacing[u_axes.x], 0.0, u_dims[u_axes.x] - 1.0);
+    float layer = min(floor(x), u_dims[u_axes.x] - 2.0);
+    float f = x - layer;
+    float s = texture(t_stack, vec3(uv, layer)).r;
+    return s * (1.0 - f) + texture(t_stack, vec3(uv, layer + 1.0)).r * f;
+}
+
+#if MASK_NONFINITE
+bool validAt(int j, float t, vec3 origin, vec3 dir) {
+    vec3 p = origin + t * dir;
+    p[u_axes.x] = float(j) * u_slice_distance;
+    return insideValidCell(p);
+}
+#endif
+
+void main() {
+    vec3 origin, dir;
+    pixelRay(origin, dir);
+    if (dir[u_axes.x] == 0.0) discard;  // parallel to the slices
+    vec2 range = intersectBox(origin, dir, vec3(0.0), u_extent);
+    float cos_theta = dot(dir, u_forward);
+    int j = v_slice;
+    float t = sliceT(j, origin, dir);
+    if (!sliceInside(j, t, origin, dir, cos_theta)) discard;
+#if MASK_NONFINITE
+    if (!validAt(j, t, origin, dir)) discard;
+#endif
+    int ahead = dir[u_axes.x] > 0.0 ? 1 : -1;  // index step away from the eye
+    float t_near = sliceT(j - ahead, origin, dir);
+    float t_far = sliceT(j + ahead, origin, dir);
+    bool near_inside = sliceInside(j - ahead, t_near, origin, dir, cos_theta);
+    bool far_inside = sliceInside(j + ahead, t_far, origin, dir, cos_theta);
+    float s = sampleSlice(j, t, origin, dir);
+#if !PREINTEGRATE
+    float a = near_inside ? 0.5 * (t_near + t) : range.x;
+    float b = far_inside ? 0.5 * (t + t_far) : range.y;
+    if (!(near_inside && far_inside)) s = sampleBetween(origin + (0.5 * (a + b)) * dir);
+    vec4 rgba = applyTF(s);
+    if (rgba.a <= 0.0 || b <= a) discard;
+    float transparency = rgba.a > 0.5 ? transparencyTF(s) : 1.0 - rgba.a;
+    float alpha = correctOpacity(rgba.a, transparency, (b - a) * u_inv_unit);
+    f_color = vec4(rgba.rgb * alpha, alpha);
+#else
+    // from this slice to the next one behind it (or to the box exit), and in front of
+    // the first slice a ray meets, the piece from the box entry
+    float s_back = far_inside ? sampleSlice(j + ahead, t_far, origin, dir)
+                              : sampleBetween(origin + range.y * dir);
+    vec4 back = preintegratedSegment(s, s_back, max((far_inside ? t_far : range.y) - t, 0.0));
+    if (!near_inside) {
+        vec4 front = preintegratedSegment(sampleBetween(origin + range.x * dir), s, max(t - range.x, 0.0));
+        back = front + (1.0 - front.a) * back;
+    }
+    f_color = back;
+#endif
+    if (f_color.a <= 0.0) discard;
+}
