@@ -474,6 +474,10 @@ def _load_bench(argv):
 def main(argv=None) -> int:
     """Run the command line; returns the exit status (0, 1, 2 or 130)."""
     argv = list(sys.argv[1:] if argv is None else argv)
+    if argv[:1] == ["view"]:
+        # the viewer parses its own arguments (argparse's REMAINDER would reject options
+        # before INPUT, --help included)
+        return cmd_view(argparse.Namespace(command="view", view_args=argv[1:]))
     debug = bool(os.environ.get("DVR_GL_DEBUG"))
     bench_module = _load_bench(argv)
     parser = build_parser(bench_module)

@@ -124,3 +124,26 @@ def load_tf_json(path) -> TransferFunction:
     if unknown:
         raise ValueError(f"transfer function file {os.fspath(path)!r} has unknown keys {sorted(unknown)}")
     return TransferFunction(spec["color"], spec["opacity"], spec.get("unit_distance", 1.0))
+
+
+def save_tf_json(path, tf: TransferFunction):
+    """Write ``tf`` as the JSON :func:`load_tf_json` reads (and ``dvr-gl render --tf
+    FILE``), one control point per line. Numbers are written with Python's shortest
+    round-tripping ``repr``, so loading the file gives back exactly the same function.
+    The write is atomic (:func:`dvr_gl.io.atomic_write`). Returns ``path``."""
+    from .io import atomic_write
+
+    if not isinstance(tf, TransferFunction):
+        raise TypeError(f"tf must be a dvr_gl.TransferFunction, got {type(tf).__name__}")
+    spec = tf.to_dict()
+
+    def rows(points):
+        return ",\n".join("    " + json.dumps([float(v) for v in row]) for row in points)
+
+    text = ("{\n"
+            f'  "color": [\n{rows(spec["color"])}\n  ],\n'
+            f'  "opacity": [\n{rows(spec["opacity"])}\n  ],\n'
+            f'  "unit_distance": {json.dumps(float(spec["unit_distance"]))}\n'
+            "}\n")
+    atomic_write(os.fspath(path), text.encode("utf-8"))
+    return path
