@@ -356,6 +356,7 @@ def run_slicing(args, err=sys.stderr):
                         row = _row(name, scene, label, technique, None, distance / volume.min_spacing,
                                    distance, ts, metrics.compare(image, exact))
                         row["interpolate"] = k
+                        row["series"] = label.replace(f" k={k}", "")  # one figure line per technique
                         row["preintegrate"] = bool(opts.get("preintegrate"))
                         rows.append(row)
     finally:
@@ -559,15 +560,16 @@ def figure_png(rows, info) -> bytes:
     styles = {"dvr_gl raycast": ("tab:blue", "o"), "dvr_gl raycast+skip": ("tab:green", "s"),
               "VTK GPU raycast": ("tab:red", "^")}
     for ax, name in zip(axes, names):
-        for label in dict.fromkeys(r["renderer"] for r in rows):
+        for label in dict.fromkeys(r.get("series", r["renderer"]) for r in rows):
             pts = sorted(((r["ms_median"], r["rmse"], r["step_voxels"]) for r in rows
-                          if r["dataset"] == name and r["renderer"] == label), key=lambda p: -p[2])
+                          if r["dataset"] == name and r.get("series", r["renderer"]) == label),
+                         key=lambda p: -p[2])
             if not pts:
                 continue
             color, marker = styles.get(label, (None, "x"))
             ax.plot([p[0] for p in pts], [p[1] for p in pts], marker=marker, color=color, label=label)
             for t, e, s in pts:
-                ax.annotate(f"{s:g}", (t, e), textcoords="offset points", xytext=(4, 4), fontsize=7, color=color)
+                ax.annotate(f"{s:.3g}", (t, e), textcoords="offset points", xytext=(4, 4), fontsize=7, color=color)
         ax.set_xscale("log")
         ax.set_yscale("log")
         ax.set_xlabel("median time per frame (ms)")
