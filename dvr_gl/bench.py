@@ -124,6 +124,19 @@ def datasets(names, chest_path=None):
     return out
 
 
+def _load_datasets(names, chest_path, err):
+    """``datasets`` for each name, skipping (with a message) those whose file is missing."""
+    sets = []
+    for name in names:
+        try:
+            sets.extend(datasets([name], chest_path=chest_path))
+        except FileNotFoundError as e:
+            print(f"dvr-gl bench: skipping {name}: {e}", file=err)
+    if not sets:
+        raise SystemExit("dvr-gl bench: no data set could be loaded")
+    return sets
+
+
 # -- progress ------------------------------------------------------------------------------
 class Progress:
     """A one-line text progress bar on stderr (one line per update when not a terminal)."""
@@ -233,14 +246,7 @@ def run(args, err=sys.stderr):
             vtk_note = f"VTK not available ({e}); VTK rows skipped (pip install 'dvr-gl[bench]')"
             print(f"dvr-gl bench: {vtk_note}", file=err)
 
-    sets = []
-    for name in names:
-        try:
-            sets.extend(datasets([name], chest_path=args.chest))
-        except FileNotFoundError as e:
-            print(f"dvr-gl bench: skipping {name}: {e}", file=err)
-    if not sets:
-        raise SystemExit("dvr-gl bench: no data set could be loaded")
+    sets = _load_datasets(names, args.chest, err)
 
     renderers = [r for r in RENDERERS if r[1] != "vtk" or peer is not None]
     frames = 1 + args.repeats  # one warm-up frame, then the timed ones
@@ -318,14 +324,7 @@ def run_slicing(args, err=sys.stderr):
 
     size = args.size
     names = [n.strip() for n in args.datasets.split(",") if n.strip()]
-    sets = []
-    for name in names:
-        try:
-            sets.extend(datasets([name], chest_path=args.chest))
-        except FileNotFoundError as e:
-            print(f"dvr-gl bench: skipping {name}: {e}", file=err)
-    if not sets:
-        raise SystemExit("dvr-gl bench: no data set could be loaded")
+    sets = _load_datasets(names, args.chest, err)
     configs = slicing_configs()
     ks = sorted({c[3] for c in configs})
     frames = 1 + args.repeats

@@ -83,6 +83,16 @@ def preintegration_uniforms(table):
     return {"u_pi_lo": table.lo, "u_pi_scale": table.scale, "u_pi_size": table.size}
 
 
+def add_optional_inputs(renderer, plan, textures, uniforms):
+    """Add what a plan's optional features read: the pre-integration table and the
+    masked-cell texture."""
+    if getattr(plan, "preint", None) is not None:
+        textures["t_preint"] = renderer.preintegration_texture(plan.preint)
+        uniforms.update(preintegration_uniforms(plan.preint))
+    if plan.scene.volume.has_nonfinite:
+        textures["t_cell_valid"] = renderer.cell_valid_texture(plan.scene.volume)
+
+
 def bind(prog, textures, uniforms):
     """Bind ``textures`` (sampler name -> texture) to consecutive units and set the
     uniforms the program has (the compiler drops those a variant does not use)."""

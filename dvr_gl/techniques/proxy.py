@@ -28,13 +28,17 @@ eye, i.e. by a viewer looking along ``+normal``: the cross product of consecutiv
 points along ``-normal``. After any projection that keeps the eye in front, they are
 front-facing under OpenGL's default ``GL_CCW`` rule.
 
-Tolerance: :func:`box_tolerance` = ``1e-10 * (diagonal + largest |coordinate|)``. Corners
-closer than that to a plane count as lying on it, which merges the (up to three) equal
-intersection points of the edges meeting in such a corner and keeps a plane through a
-corner, an edge or a face from producing slivers or duplicates. The constant is far
-above float64 rounding (a few 1e-16 of the coordinates' magnitude) and far below any
-sensible box proportion (a box 2 samples thick in a 1000-sample volume is 2e-3 of its
-diagonal).
+Tolerance: :func:`box_tolerance` = ``1e-10 * (diagonal + largest |coordinate|)``, a
+length. Where a plane meets an edge within that distance of one of its ends, the point
+becomes that corner, so the (up to three) points a plane through a corner makes on the
+corner's edges merge into one; and a vertex within that distance of the line through
+its neighbours is dropped. Every polygon is then within about that distance of the
+exact cut, up to rounding, with no duplicate or flat vertices and no zero-area slivers
+from planes through corners, edges or faces. The distance is measured along the edges,
+not from the plane: a plane nearly parallel to an edge may pass a corner closely yet
+meet the edge far from it. The constant is far above float64 rounding and far below
+any sensible box proportion (a box 2 samples thick in a 1000-sample volume is 2e-3 of
+its diagonal).
 """
 
 from __future__ import annotations
@@ -108,8 +112,11 @@ def plane_polygons(corners, normal, offsets):
     Returns ``vertices`` (K, 6, 3) float64 and ``counts`` (K,) int64: polygon k is
     ``vertices[k, :counts[k]]``, counter-clockwise seen from the eye, the unused slots
     repeating its last vertex. ``counts[k]`` is 3 to 6, or 0 where the plane misses the
-    box or only touches it in a corner or along an edge (the slots then hold the touching
-    points, padded, or zeros when there are none). A plane lying on a face gives that face.
+    box or only touches it in a corner or along an edge (within the tolerance; the slots
+    then hold what points there are, padded, or zeros). A plane lying on a face gives
+    that face. Vertices are the corners on the plane and the points where it crosses
+    edges, merged and cleaned up as the module's note on tolerance says, sorted by angle
+    around their centroid.
     """
     corners = _corners(corners)
     n = _unit(normal)
@@ -117,22 +124,32 @@ def plane_polygons(corners, normal, offsets):
     k = off.size
     tol = box_tolerance(corners)
 
-    # signed distance of every corner from every plane, snapped to exactly 0 near it
+    # signed distance of every corner from every plane. No tolerance here: for a plane
+    # nearly parallel to an edge, a tiny distance at one end still means a long way
+    # along the edge; closeness is judged by distance along the edge, below.
     dist = (corners @ n)[None, :] - off[:, None]                    # (K, 8)
-    dist[np.abs(dist) <= tol] = 0.0
     sign = np.sign(dist)
     da, db = dist[:, EDGES[:, 0]], dist[:, EDGES[:, 1]]             # (K, 12)
     crossing = sign[:, EDGES[:, 0]] * sign[:, EDGES[:, 1]] < 0      # strictly inside the edge
-    t = np.where(crossing, da / np.where(crossing, da - db, 1.0), 0.0)[..., None]
-    edge_points = corners[EDGES[:, 0]] * (1.0 - t) + corners[EDGES[:, 1]] * t
+    t = np.where(crossing, da / np.where(crossing, da - db, 1.0), 0.0)
+    edge_points = corners[EDGES[:, 0]] * (1.0 - t[..., None]) + corners[EDGES[:, 1]] * t[..., None]
 
-    # candidates: corners on the plane, and edges crossed strictly between their ends.
-    # A crossing point is farther than tol from both ends of its edge, so no two
-    # candidates coincide and nothing needs merging afterwards.
+    # a crossing within tol of an end of its edge becomes that corner: this merges the
+    # up to three points a plane through (or next to) a corner makes on its edges
+    length = np.linalg.norm(corners[EDGES[:, 1]] - corners[EDGES[:, 0]], axis=1)   # (12,)
+    at_a = crossing & (t * length <= tol)
+    at_b = crossing & ~at_a & ((1.0 - t) * length <= tol)
+    ends = np.arange(8)[None, :]
+    merged = (at_a.astype(np.int64) @ (EDGES[:, 0, None] == ends)
+              + at_b.astype(np.int64) @ (EDGES[:, 1, None] == ends)) > 0   # (K, 8)
+
+    # candidates: corners on the plane or merged into, and the remaining crossings.
+    # Any two are farther apart than tol (remaining crossings are farther than tol
+    # from their edge's ends, and edges meet only at corners, at right angles).
     points = np.concatenate([np.broadcast_to(corners, (k, 8, 3)), edge_points], axis=1)
-    valid = np.concatenate([sign == 0, crossing], axis=1)           # (K, 20)
+    valid = np.concatenate([(sign == 0) | merged, crossing & ~at_a & ~at_b], axis=1)   # (K, 20)
     found = valid.sum(axis=1)
-    if np.any(found > 6):
+    if np.any(found > 6):  # cannot happen for a box thicker than tol
         raise ValueError("the box is too thin for the intersection tolerance")
 
     centroid = (points * valid[..., None]).sum(axis=1) / np.maximum(found, 1)[:, None]
@@ -141,10 +158,47 @@ def plane_polygons(corners, normal, offsets):
     angle = np.where(valid, np.arctan2(rel @ v, rel @ u), np.inf)
     order = np.argsort(angle, axis=1, kind="stable")[:, :6]
     vertices = np.take_along_axis(points, order[..., None], axis=1)
-    vertices = _pad(vertices, found)
     vertices[found == 0] = 0.0
-    counts = np.where(found >= 3, found, 0)
-    return vertices, counts
+    return _drop_flat(vertices, found, tol)
+
+
+def _drop_flat(vertices, counts, tol):
+    """Drop the vertices of ordered polygons that lie within ``tol`` of the line through
+    their two neighbours (a plane hugging a box edge can leave such a point between two
+    merged corners), pad, and give count 0 where fewer than 3 vertices remain or all of
+    them are flat (a polygon thinner than ``tol``). Returns (vertices, counts).
+
+    Of a run of neighbouring flat vertices only the first goes in one pass, then the
+    rest are judged again: two close vertices at a real corner are each flat against
+    the other, and dropping both would cut the corner off."""
+    counts = counts.copy()
+    for _ in range(vertices.shape[1]):
+        flat, prev_flat = _flat_vertices(vertices, counts, tol)
+        drop = flat & ~prev_flat
+        if not drop.any():
+            break
+        keep = (np.arange(vertices.shape[1])[None, :] < counts[:, None]) & ~drop
+        order = np.argsort(~keep, axis=1, kind="stable")             # kept first, in order
+        counts = keep.sum(axis=1)
+        vertices = np.take_along_axis(vertices, order[..., None], axis=1)
+    flat, _ = _flat_vertices(vertices, counts, tol)
+    used = np.arange(vertices.shape[1])[None, :] < counts[:, None]
+    thin = np.all(flat | ~used, axis=1)
+    return _pad(vertices, counts), np.where((counts >= 3) & ~thin, counts, 0)
+
+
+def _flat_vertices(vertices, counts, tol):
+    """Per slot: is the vertex within ``tol`` of its neighbours' chord (polygons of 3 or
+    more vertices only), and is its predecessor."""
+    slot = np.arange(vertices.shape[1])[None, :]
+    m = np.maximum(counts, 1)[:, None]
+    prev = np.take_along_axis(vertices, ((slot - 1) % m)[..., None], axis=1)
+    nxt = np.take_along_axis(vertices, ((slot + 1) % m)[..., None], axis=1)
+    chord = nxt - prev
+    height = np.linalg.norm(np.cross(chord, vertices - prev), axis=-1)
+    flat = (height <= tol * np.linalg.norm(chord, axis=-1)) & (slot < counts[:, None]) & (counts[:, None] >= 3)
+    prev_flat = np.take_along_axis(flat, (slot - 1) % m, axis=1)
+    return flat, prev_flat
 
 
 def _pad(vertices, counts):
@@ -227,7 +281,8 @@ def path_slots(corners, normal, offsets, depth_origin=None):
     da, db = depth[edges[:, 0]][None, :], depth[edges[:, 1]][None, :]   # (1, 12)
     d = off[:, None]
     hit = (da != db) & (d >= np.minimum(da, db)) & (d <= np.maximum(da, db))   # (K, 12)
-    t = np.clip((d - da) / np.where(da != db, db - da, 1.0), 0.0, 1.0)[..., None]
+    with np.errstate(over="ignore"):  # a huge ratio (edge all but parallel) clips to 0 or 1
+        t = np.clip((d - da) / np.where(da != db, db - da, 1.0), 0.0, 1.0)[..., None]
     points = corners[edges[:, 0]] * (1.0 - t) + corners[edges[:, 1]] * t     # (K, 12, 3)
 
     slots = np.empty((off.size, 6, 3))
@@ -243,22 +298,27 @@ def path_slots(corners, normal, offsets, depth_origin=None):
 
 def polygons_by_paths(corners, normal, offsets):
     """The shader's polygons (:func:`path_slots`) in the layout of
-    :func:`plane_polygons`: slots equal (within :func:`box_tolerance`) to an earlier slot
-    dropped, the rest kept in slot order (counter-clockwise seen from the eye), the
-    unused slots repeating the last vertex; count 0 where fewer than 3 distinct points
-    remain (a plane outside the box, or touching it in a corner or along an edge)."""
+    :func:`plane_polygons`, cleaned up by the same rules: a slot point within
+    :func:`box_tolerance` of a box corner becomes that corner, slots equal to an earlier
+    slot are dropped, the rest kept in slot order (counter-clockwise seen from the eye),
+    flat vertices dropped, the unused slots repeating the last vertex; count 0 where
+    fewer than 3 vertices remain (a plane outside the box, or touching it in a corner
+    or along an edge)."""
     corners = _corners(corners)
     slots, inside = path_slots(corners, normal, offsets)
     tol = box_tolerance(corners)
-    gap = np.linalg.norm(slots[:, :, None, :] - slots[:, None, :, :], axis=-1)   # (K, 6, 6)
+    to_corner = np.linalg.norm(slots[:, :, None, :] - corners[None, None], axis=-1)   # (K, 6, 8)
+    nearest = np.argmin(to_corner, axis=2)
+    snap = np.take_along_axis(to_corner, nearest[..., None], axis=2)[..., 0] <= tol
+    slots = np.where(snap[..., None], corners[nearest], slots)
+    gap = np.linalg.norm(slots[:, :, None, :] - slots[:, None, :, :], axis=-1)     # (K, 6, 6)
     earlier = np.tril(np.ones((6, 6), bool), k=-1)[None]
     repeat = np.any((gap <= tol) & earlier, axis=2)                  # same as an earlier slot
     keep = ~repeat & inside[:, None]
     found = keep.sum(axis=1)
     order = np.argsort(~keep, axis=1, kind="stable")                 # kept slots first, in order
-    vertices = _pad(np.take_along_axis(slots, order[..., None], axis=1), found)
-    counts = np.where(found >= 3, found, 0)
-    return vertices, counts
+    vertices = np.take_along_axis(slots, order[..., None], axis=1)
+    return _drop_flat(vertices, found, tol)
 
 
 # -- slab positions ----------------------------------------------------------------------

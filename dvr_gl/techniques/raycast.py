@@ -54,8 +54,8 @@ from ..cache import TableCache
 from ..reference.shading import gradient_epsilon
 from ..scene import Scene
 from ..transfer import LookupTable
-from .common import (TARGETS, bind, camera_uniforms, check_flag, check_scene, check_step, check_target,
-                     box_proxy, preintegration_table, preintegration_uniforms, tf_uniforms, volume_uniforms)
+from .common import (TARGETS, add_optional_inputs, bind, box_proxy, camera_uniforms, check_flag, check_scene,
+                     check_step, check_target, preintegration_table, tf_uniforms, volume_uniforms)
 
 BRICK = 8            # brick edge in cells, for empty-space skipping
 JITTER_TABLE = 64    # jitter table edge in pixels
@@ -228,15 +228,11 @@ def draw(renderer, plan):
         textures["t_jitter"] = renderer.small_texture("jitter", plan.jitter)
     if plan.occupancy is not None:
         textures["t_occupancy"] = renderer.occupancy_texture(volume, scene.tf, plan.occupancy)
-    if volume.has_nonfinite:
-        textures["t_cell_valid"] = renderer.cell_valid_texture(volume)
     uniforms = {**camera_uniforms(scene), **volume_uniforms(volume), **tf_uniforms(plan.lut, scene.tf),
                 "u_step": plan.step, "u_max_segments": plan.max_segments}
     if plan.occupancy is not None:
         uniforms["u_brick"] = float(BRICK)
-    if plan.preint is not None:
-        textures["t_preint"] = renderer.preintegration_texture(plan.preint)
-        uniforms.update(preintegration_uniforms(plan.preint))
+    add_optional_inputs(renderer, plan, textures, uniforms)
     if plan.ert_transmittance > 0:
         uniforms["u_ert_transmittance"] = plan.ert_transmittance
     if scene.mode == "isosurface":

@@ -49,8 +49,9 @@ import numpy as np
 from ..cache import TableCache
 from ..scene import Scene
 from ..transfer import LookupTable
-from .common import (TARGETS, bind, box_depth_range, camera_uniforms, check_flag, check_scene, check_target,
-                     eye_view_projection, preintegration_table, preintegration_uniforms, tf_uniforms, volume_uniforms)
+from .common import (TARGETS, add_optional_inputs, bind, box_depth_range, camera_uniforms, check_flag,
+                     check_scene, check_target, eye_view_projection, preintegration_table, tf_uniforms,
+                     volume_uniforms)
 
 INFLATE = 1e-3  # slice quads are grown by this fraction of the box diagonal
 
@@ -157,11 +158,7 @@ def draw(renderer, plan):
                 "u_axes": (plan.axis, u, v), "u_slice_distance": plan.slice_distance,
                 "u_slice_count": plan.count, "u_per_cell": plan.interpolate + 1,
                 "u_min_depth": plan.min_depth}
-    if plan.preint is not None:
-        textures["t_preint"] = renderer.preintegration_texture(plan.preint)
-        uniforms.update(preintegration_uniforms(plan.preint))
-    if volume.has_nonfinite:
-        textures["t_cell_valid"] = renderer.cell_valid_texture(volume)
+    add_optional_inputs(renderer, plan, textures, uniforms)
     bind(prog, textures, uniforms)
 
     dmin, dmax = box_depth_range(scene)

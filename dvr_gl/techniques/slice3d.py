@@ -52,8 +52,9 @@ from ..cache import TableCache
 from ..scene import Scene
 from ..transfer import LookupTable
 from . import proxy as proxy_geometry
-from .common import (TARGETS, bind, box_proxy, camera_uniforms, check_flag, check_scene, check_step,
-                     check_target, eye_view_projection, preintegration_table, preintegration_uniforms, tf_uniforms, volume_uniforms)
+from .common import (TARGETS, add_optional_inputs, bind, box_proxy, camera_uniforms, check_flag, check_scene,
+                     check_step, check_target, eye_view_projection, preintegration_table, tf_uniforms,
+                     volume_uniforms)
 
 PROXIES = ("cpu", "vertex")
 INFLATE = 1e-3  # proxy polygons are cut from the box grown by this fraction of its diagonal
@@ -166,11 +167,7 @@ def draw(renderer, plan):
     textures = {"t_volume": renderer.volume_texture(volume), "t_tf": renderer.tf_texture(plan.lut)}
     uniforms = {**camera_uniforms(scene), **volume_uniforms(volume), **tf_uniforms(plan.lut, scene.tf),
                 "u_far_depth": plan.far_depth, "u_step": plan.step, "u_slice_count": plan.count}
-    if plan.preint is not None:
-        textures["t_preint"] = renderer.preintegration_texture(plan.preint)
-        uniforms.update(preintegration_uniforms(plan.preint))
-    if volume.has_nonfinite:
-        textures["t_cell_valid"] = renderer.cell_valid_texture(volume)
+    add_optional_inputs(renderer, plan, textures, uniforms)
     bind(prog, textures, uniforms)
 
     fbo = renderer.target(scene.width, scene.height, TARGETS[plan.target])
