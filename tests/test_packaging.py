@@ -27,8 +27,9 @@ def wheel(tmp_path_factory):
 
 def test_wheel_ships_shaders_and_data(wheel):
     names = set(zipfile.ZipFile(wheel).namelist())
-    assert "dvr_gl/shaders/common/compositing.glsl" in names
-    assert "dvr_gl/shaders/raycast/raycast.frag" in names
+    shaders = {f"dvr_gl/shaders/{p.relative_to(ROOT / 'shaders').as_posix()}"
+               for p in (ROOT / "shaders").rglob("*") if p.is_file()}
+    assert len(shaders) > 15 and shaders <= names, sorted(shaders - names)  # every shader, every folder
     assert "dvr_gl/data/headsq_quarter.npz" in names
     assert "dvr_gl/data/LICENSE-headsq.txt" in names
     assert any(n.endswith("entry_points.txt") for n in names)
@@ -44,7 +45,9 @@ def test_installed_wheel_renders_from_an_empty_folder(wheel, tmp_path):
     code = ("import dvr_gl, numpy as np; from dvr_gl import data;"
             "assert dvr_gl.__file__.startswith(%r), dvr_gl.__file__;"
             "h = data.ct_head(); s = dvr_gl.Scene(h, data.ct_head_tf(), dvr_gl.default_camera(h), 32, 32);"
-            "r = dvr_gl.Renderer(); img = r.render(s); print(float(img[..., 3].max()))") % str(site)
+            "r = dvr_gl.Renderer(); img = r.render(s);"
+            "imgs = [r.render(s, technique=t, preintegrate=True) for t in ('slice2d', 'slice3d')];"
+            "print(min(float(i[..., 3].max()) for i in [img] + imgs))") % str(site)
     out = subprocess.run([sys.executable, "-c", code], cwd=work, env=env, capture_output=True, text=True)
     assert out.returncode == 0, out.stderr
     assert float(out.stdout.strip()) > 0.1
