@@ -258,6 +258,10 @@ def test_view_passes_its_arguments(capsys, monkeypatch):
     monkeypatch.setitem(sys.modules, "dvr_gl.viewer", fake)
     assert _run(["view", "builtin:ct_head", "--size", "64x64", "--help"], capsys)[0] == 0
     assert seen == [["builtin:ct_head", "--size", "64x64", "--help"]]
+    # options before INPUT (and --help alone) reach the viewer too
+    assert _run(["view", "--size", "64x64", "builtin:ct_head"], capsys)[0] == 0
+    assert _run(["view", "--help"], capsys)[0] == 0
+    assert seen[1:] == [["--size", "64x64", "builtin:ct_head"], ["--help"]]
 
 
 def test_demo_is_wired(capsys, monkeypatch, tmp_path):
@@ -286,3 +290,21 @@ def test_bench_is_wired(capsys, monkeypatch):
     monkeypatch.setitem(sys.modules, "dvr_gl.bench", None)
     code, _, err = _run(["bench"], capsys)
     assert code == 2 and "not available" in err
+
+
+def test_render_slicing_options(renderer, tiny, capsys):
+    d, _ = tiny
+    out = d / "slices.png"
+    for argv in (["--technique", "slice3d", "--proxy", "vertex", "--preintegrate", "--step", "0.5"],
+                 ["--technique", "slice2d", "--interpolate", "2", "--target", "rgba16f"],
+                 ["--technique", "slice3d", "--shells"]):
+        code, stdout, err = _run(["render", d / "tiny.npy", "--size", "24x24", "--out", out] + argv, capsys)
+        assert code == 0, err
+        assert argv[1] in stdout
+        assert _png(out)[1][..., 3].max() > 0
+    for argv, message in ((["--interpolate", "1"], "--interpolate: applies to --technique slice2d only, not raycast"),
+                          (["--technique", "slice2d", "--step", "1"], "--step: slice2d's slice distance is fixed"),
+                          (["--shells"], "--shells: applies to --technique slice3d only"),
+                          (["--technique", "slice3d", "--mode", "mip"], "slice3d renders mode 'composite', got mode 'mip'")):
+        code, _, err = _run(["render", d / "tiny.npy", "--out", out] + argv, capsys)
+        assert code == 2 and message in err, err
