@@ -272,8 +272,9 @@ def _plan_params(make_plan):
 
 def probe_technique(name, scene, tables):
     """Ask technique ``name`` whether it can render ``scene``'s data and whether it
-    takes a ``step``: a module attribute ``accepts_step`` settles the latter; otherwise
-    ``make_plan`` is tried with a step and, if it refuses, without one."""
+    takes a ``step``: the module attribute ``TAKES_STEP`` of the technique interface
+    settles the latter; a module without it has ``make_plan`` tried with a step and, if
+    it refuses, without one."""
     from .techniques import get_technique
 
     try:
@@ -288,10 +289,7 @@ def probe_technique(name, scene, tables):
         except Exception:
             default = None
     step_guess = default if default is not None else 0.5 * scene.volume.min_spacing
-    flag = getattr(tech, "accepts_step", None)
-    applies_to = getattr(tech, "applies_to", None)
-    if callable(applies_to) and not applies_to(scene):
-        return TechniqueInfo(name, False, bool(flag), params, default, "does not apply to this data")
+    flag = getattr(tech, "TAKES_STEP", None)
     tries = [(True, step_guess), (False, None)] if flag is None else [(bool(flag), step_guess if flag else None)]
     reason = ""
     for accepts, step in tries:

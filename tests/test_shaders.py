@@ -150,6 +150,28 @@ def test_apply_tf_matches_lookup_table(ctx, renderer):
     np.testing.assert_allclose(gl, ref, rtol=0, atol=bound)
 
 
+def test_classified_segment(ctx, renderer):
+    """classifiedSegment = TF lookup then opacity correction, premultiplied. A lookup
+    error e (previous test) in alpha moves 1 - (1 - alpha)^x by at most x * e, x the
+    length in unit distances (up to 50 here); correctOpacity adds ~64u (tested above)
+    and the product with the colour one more rounding."""
+    tf = dvr_gl.TransferFunction(color=[(0, 1, 0, 0), (255, 0, 0, 1)],
+                                 opacity=[(0, 0.0), (10, 0.0), (11, 0.7), (250, 1.0)], unit_distance=2.0)
+    lut = LookupTable(tf)
+    rng = np.random.default_rng(5)
+    s = np.concatenate([[-5.0, 0, 10, 10.5, 11, 249.9, 250, 300], rng.uniform(-20, 280, 300)])
+    lengths = np.concatenate([[0.0, 1e-6, 0.5, 1.0, 3.0, 100.0, 2.0, 0.25], rng.uniform(0, 4, 300)])
+    inputs = np.c_[s, lengths, np.zeros((s.size, 2))].astype(np.float32)
+    gl = harness.evaluate(ctx, ["common/classification.glsl"], "out0 = classifiedSegment(in0.x, in0.y);",
+                          [inputs], textures={"t_tf": _made(renderer, renderer.tf_texture, lut)},
+                          uniforms={"u_tf_lo": lut.lo, "u_tf_scale": lut.scale, "u_tf_size": lut.size})
+    ref = common.classified_segment(lut.lookup, lut.lookup_transparency, inputs[:, 0].astype(np.float64),
+                                    inputs[:, 1].astype(np.float64))
+    assert ref[:, 3].max() > 0.9 and (ref[:, 3] == 0).any()
+    bound = float(lengths.max() / tf.unit_distance) * (4096 * 2 * U32 * 0.07 + 4 * U32) + 128 * U32
+    np.testing.assert_allclose(gl, ref, rtol=0, atol=bound)
+
+
 # -- sampling.glsl, shading.glsl, isosurface.glsl --------------------------------------
 
 @pytest.fixture(scope="module")

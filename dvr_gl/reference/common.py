@@ -34,6 +34,17 @@ def ray_box(origins, dirs, lo, hi):
     return t0, t1
 
 
+def box_rays(scene):
+    """Every pixel's ray, flattened and relative to the volume box's lower corner (as the
+    shaders see them): origins and unit directions (n, 3), entry and exit distances."""
+    lo, _ = scene.volume.bounds
+    origins, dirs = scene.camera.rays(scene.width, scene.height)
+    o = (origins - lo).reshape(-1, 3)
+    d = dirs.reshape(-1, 3)
+    t0, t1 = ray_box(o, d, np.zeros(3), scene.volume.extent)
+    return o, d, t0, t1
+
+
 def world_to_index(volume, points):
     """World points (..., 3) to continuous sample indices (..., 3) in x, y, z order."""
     return (np.asarray(points, np.float64) - volume.origin) / volume.spacing
@@ -82,6 +93,26 @@ def correct_opacity(alpha, length_over_unit, transparency=None):
         log_t = np.where(a <= 0.5, np.log1p(-np.minimum(a, 0.5)), np.log(np.maximum(b, 0)))
         out = -np.expm1(x * log_t)
     return np.where(x <= 0, 0.0, np.where((a >= 1) | (b <= 0), 1.0, out))
+
+
+def classifier(plan, lut_exact=False):
+    """(classify, transparency) for a plan: its lookup table (GLSL ``applyTF`` and
+    ``transparencyTF``), or with ``lut_exact`` the exact transfer function."""
+    if lut_exact:
+        tf = plan.scene.tf
+        return (lambda s: np.concatenate([tf.color(s), tf.opacity(s)[..., None]], axis=-1),
+                lambda s: 1 - tf.opacity(s))
+    return plan.lut.lookup, plan.lut.lookup_transparency
+
+
+def classified_segment(classify, transparency, s, length_over_unit):
+    """Premultiplied RGBA (..., 4) of segments with field value ``s``, opacity corrected
+    for their length (GLSL ``classifiedSegment``)."""
+    rgba = classify(s)
+    alpha = correct_opacity(rgba[..., 3], length_over_unit, transparency(s))
+    out = np.concatenate([rgba[..., :3] * alpha[..., None], alpha[..., None]], axis=-1)
+    out[rgba[..., 3] <= 0] = 0
+    return out
 
 
 def composite_front_to_back(color_acc, alpha_acc, rgb, alpha):

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .common import (cell_is_valid, composite_front_to_back, correct_opacity, ray_box, trilinear,
+from .common import (box_rays, cell_is_valid, classifier, composite_front_to_back, correct_opacity, trilinear,
                      world_to_index)
 from .shading import gradient, gradient_epsilon, shade_blinn_phong
 
@@ -44,25 +44,12 @@ def render_plan(plan, lut_exact=False):
     ``lut_exact=True`` classifies with the exact piecewise-linear transfer function
     instead of the lookup table (the ideal float64 midpoint marcher)."""
     scene = plan.scene
-    volume, tf, cam = scene.volume, scene.tf, scene.camera
+    volume, tf = scene.volume, scene.tf
     H, W = scene.height, scene.width
     values = volume.values(np.float64)
     lo, _ = volume.bounds
-
-    if lut_exact:
-        def classify(s):
-            return np.concatenate([tf.color(s), tf.opacity(s)[..., None]], axis=-1)
-
-        def transparency(s):
-            return 1 - tf.opacity(s)
-    else:
-        classify = plan.lut.lookup
-        transparency = plan.lut.lookup_transparency
-
-    origins, dirs = cam.rays(W, H)
-    origins = (origins - lo).reshape(-1, 3)
-    dirs = dirs.reshape(-1, 3)
-    t0, t1 = ray_box(origins, dirs, np.zeros(3), volume.extent)
+    classify, transparency = classifier(plan, lut_exact)
+    origins, dirs, t0, t1 = box_rays(scene)
     jitter = _jitter_per_pixel(plan, H, W).reshape(-1)
     n = origins.shape[0]
     out = np.zeros((n, 4))

@@ -5,8 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .common import blend_over, cell_is_valid, correct_opacity, ray_box, trilinear, world_to_index
-from .slice3d import _classifier
+from .common import blend_over, box_rays, cell_is_valid, classified_segment, classifier, trilinear, world_to_index
 
 
 def render_plan(plan, lut_exact=False):
@@ -17,14 +16,11 @@ def render_plan(plan, lut_exact=False):
     lo, _ = volume.bounds
     extent = volume.extent
     w, (u, v) = plan.axis, plan.other_axes
-    origins, dirs = cam.rays(W, H)
-    o = (origins - lo).reshape(-1, 3)
-    d = dirs.reshape(-1, 3)
-    t0, t1 = ray_box(o, d, np.zeros(3), extent)
+    o, d, t0, t1 = box_rays(scene)
     cos_theta = d @ cam.forward
     ahead = np.where(d[:, w] > 0, 1, -1)
     moving = d[:, w] != 0
-    classify, transparency = _classifier(plan, lut_exact)
+    classify, transparency = classifier(plan, lut_exact)
 
     def slice_t(j):
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -69,16 +65,13 @@ def render_plan(plan, lut_exact=False):
             b = np.where(far_in, 0.5 * (tj + t_far), r1)
             partial = ~(near_in & far_in)
             s = np.where(partial, sample_between(0.5 * (a + b)), s)
-            rgba = classify(s)
-            alpha = correct_opacity(rgba[:, 3], (b - a) / scene.tf.unit_distance, transparency(s))
-            src = np.concatenate([rgba[:, :3] * alpha[:, None], alpha[:, None]], axis=1)
-            src[(rgba[:, 3] <= 0) | (b <= a)] = 0
+            src = classified_segment(classify, transparency, s, (b - a) / scene.tf.unit_distance)
         else:
             t_far_all = np.where(here, slice_t(j_far), 0)
             s_back = np.where(far_in, sample(j_far, t_far_all)[rows], sample_between(r1))
             back = plan.preint.segment(s, s_back, np.maximum(np.where(far_in, t_far, r1) - tj, 0))
             front = plan.preint.segment(sample_between(r0), s, np.maximum(tj - r0, 0))
-            src = np.where(near_in[:, None], back, front + (1 - front[:, 3:4]) * back)
+            src = np.where(near_in[:, None], back, blend_over(back, front))
         src[src[:, 3] <= 0] = 0
         acc[rows] = blend_over(acc[rows], src, plan.target)
     return acc.reshape(H, W, 4)

@@ -8,15 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .common import blend_over, cell_is_valid, correct_opacity, ray_box, trilinear, world_to_index
-
-
-def _classifier(plan, lut_exact):
-    tf = plan.scene.tf
-    if lut_exact:
-        return (lambda s: np.concatenate([tf.color(s), tf.opacity(s)[..., None]], axis=-1),
-                lambda s: 1 - tf.opacity(s))
-    return plan.lut.lookup, plan.lut.lookup_transparency
+from .common import blend_over, box_rays, cell_is_valid, classified_segment, classifier, trilinear, world_to_index
 
 
 def segment_colors(plan, sample, valid, a, b, lut_exact=False):
@@ -28,13 +20,8 @@ def segment_colors(plan, sample, valid, a, b, lut_exact=False):
         if valid is not None:
             out[~valid(0.5 * (a + b))] = 0
         return out
-    classify, transparency = _classifier(plan, lut_exact)
     tm = 0.5 * (a + b)
-    s = sample(tm)
-    rgba = classify(s)
-    alpha = correct_opacity(rgba[:, 3], (b - a) / plan.scene.tf.unit_distance, transparency(s))
-    out = np.concatenate([rgba[:, :3] * alpha[:, None], alpha[:, None]], axis=1)
-    out[rgba[:, 3] <= 0] = 0
+    out = classified_segment(*classifier(plan, lut_exact), sample(tm), (b - a) / plan.scene.tf.unit_distance)
     if valid is not None:
         out[~valid(tm)] = 0
     return out
@@ -46,10 +33,7 @@ def render_plan(plan, lut_exact=False):
     H, W = scene.height, scene.width
     values = volume.values(np.float64)
     lo, _ = volume.bounds
-    origins, dirs = cam.rays(W, H)
-    o = (origins - lo).reshape(-1, 3)
-    d = dirs.reshape(-1, 3)
-    t0, t1 = ray_box(o, d, np.zeros(3), volume.extent)
+    o, d, t0, t1 = box_rays(scene)
     cos_theta = d @ cam.forward
 
     def slice_t(k):
@@ -87,7 +71,7 @@ def render_plan(plan, lut_exact=False):
         else:
             src = segment_colors(plan, sample, valid, tk, np.where(far_in, t_far, r1))
             front = segment_colors(plan, sample, valid, r0, tk)
-            src = np.where(near_in[:, None], src, front + (1 - front[:, 3:4]) * src)
+            src = np.where(near_in[:, None], src, blend_over(src, front))
         src[src[:, 3] <= 0] = 0
         acc[rows] = blend_over(acc[rows], src, plan.target)
     return acc.reshape(H, W, 4)

@@ -188,7 +188,6 @@ def draw(renderer, plan):
                 ctx.cull_face = "front"
             renderer.proxy_vao(prog, kind).render(instances=plan.count)
         elif plan.proxy == "vertex":
-            lo, _ = volume.bounds
             corners = _inflated_corners(volume)
             tables = proxy_geometry.vertex_path_tables(cam.forward)
             bind(prog, {}, {"u_corners": [tuple(c) for c in corners], "u_normal": tuple(cam.forward),
@@ -197,7 +196,7 @@ def draw(renderer, plan):
             renderer.empty_vao(prog).render(ctx.TRIANGLES, vertices=12, instances=plan.count)
         else:
             lo, _ = volume.bounds
-            offsets = plan.depths() + float(np.dot(cam.forward, cam.eye - lo))
+            offsets = proxy_geometry.plane_offsets(cam.forward, cam.eye - lo, plan.far_depth, plan.step, plan.count)
             vertices, counts = proxy_geometry.plane_polygons(_inflated_corners(volume), cam.forward, offsets)
             positions, slices = proxy_geometry.fan_triangles(vertices, counts)
             prog["u_view_proj"].write(_plane_projection(plan).astype("f4").tobytes())

@@ -1,6 +1,8 @@
-// Transfer-function lookup (NumPy twin: transfer.LookupTable.lookup).
+// Transfer-function lookup (NumPy twin: transfer.LookupTable.lookup) and classified segments.
 #ifndef DVR_CLASSIFICATION_GLSL
 #define DVR_CLASSIFICATION_GLSL
+
+#include "common/compositing.glsl"
 
 uniform sampler2D t_tf;     // (n, 2) RGBA32F: row 0 colour and unit-distance opacity,
                             // row 1 transparency 1 - opacity (precise near opacity 1)
@@ -26,6 +28,16 @@ vec4 applyTF(float s) {
 // 1 - alpha(s) with the relative precision a float32 alpha near 1 lacks.
 float transparencyTF(float s) {
     return lookupTFRow(s, 1).r;
+}
+
+// Premultiplied colour and opacity of a segment length_over_unit unit distances long
+// whose field value is s (NumPy twin: reference.common.classified_segment).
+vec4 classifiedSegment(float s, float length_over_unit) {
+    vec4 rgba = applyTF(s);
+    if (rgba.a <= 0.0) return vec4(0.0);
+    float transparency = rgba.a > 0.5 ? transparencyTF(s) : 1.0 - rgba.a;
+    float alpha = correctOpacity(rgba.a, transparency, length_over_unit);
+    return vec4(rgba.rgb * alpha, alpha);
 }
 
 #endif

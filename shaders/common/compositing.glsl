@@ -59,4 +59,10 @@ void compositeFrontToBack(inout vec3 color, inout float alpha_acc, vec3 rgb, flo
     alpha_acc += weight;
 }
 
+// The over operator on premultiplied colours: `front` seen in front of `back` (the
+// blending the slicing techniques ask of GL, done in the shader).
+vec4 over(vec4 front, vec4 back) {
+    return front + (1.0 - front.a) * back;
+}
+
 #endif

@@ -14,7 +14,6 @@
 #include "common/ray_box.glsl"
 #include "common/sampling.glsl"
 #include "common/classification.glsl"
-#include "common/compositing.glsl"
 #if PREINTEGRATE
 #include "common/preintegration.glsl"
 #endif
@@ -103,11 +102,7 @@ void main() {
     float a = near_inside ? 0.5 * (t_near + t) : range.x;
     float b = far_inside ? 0.5 * (t + t_far) : range.y;
     if (!(near_inside && far_inside)) s = sampleBetween(origin + (0.5 * (a + b)) * dir);
-    vec4 rgba = applyTF(s);
-    if (rgba.a <= 0.0 || b <= a) discard;
-    float transparency = rgba.a > 0.5 ? transparencyTF(s) : 1.0 - rgba.a;
-    float alpha = correctOpacity(rgba.a, transparency, (b - a) * u_inv_unit);
-    f_color = vec4(rgba.rgb * alpha, alpha);
+    f_color = classifiedSegment(s, (b - a) * u_inv_unit);  // zero for b <= a
 #else
     // from this slice to the next one behind it (or to the box exit), and in front of
     // the first slice a ray meets, the piece from the box entry
@@ -115,8 +110,7 @@ void main() {
                               : sampleBetween(origin + range.y * dir);
     vec4 back = preintegratedSegment(s, s_back, max((far_inside ? t_far : range.y) - t, 0.0));
     if (!near_inside) {
-        vec4 front = preintegratedSegment(sampleBetween(origin + range.x * dir), s, max(t - range.x, 0.0));
-        back = front + (1.0 - front.a) * back;
+        back = over(preintegratedSegment(sampleBetween(origin + range.x * dir), s, max(t - range.x, 0.0)), back);
     }
     f_color = back;
 #endif

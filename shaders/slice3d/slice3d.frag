@@ -17,7 +17,6 @@
 #include "common/ray_box.glsl"
 #include "common/sampling.glsl"
 #include "common/classification.glsl"
-#include "common/compositing.glsl"
 #if PREINTEGRATE
 #include "common/preintegration.glsl"
 #endif
@@ -49,17 +48,11 @@ bool sliceInside(int k, float t, vec2 range) {
 
 #if !PREINTEGRATE
 vec4 segmentColor(vec3 origin, vec3 dir, float a, float b) {
-    float len = b - a;
     vec3 p = origin + (0.5 * (a + b)) * dir;
 #if MASK_NONFINITE
     if (!insideValidCell(p)) return vec4(0.0);
 #endif
-    float s = sampleVolume(p);
-    vec4 rgba = applyTF(s);
-    if (rgba.a <= 0.0) return vec4(0.0);
-    float transparency = rgba.a > 0.5 ? transparencyTF(s) : 1.0 - rgba.a;
-    float alpha = correctOpacity(rgba.a, transparency, len * u_inv_unit);
-    return vec4(rgba.rgb * alpha, alpha);
+    return classifiedSegment(sampleVolume(p), (b - a) * u_inv_unit);
 }
 #else
 vec4 segmentColor(vec3 origin, vec3 dir, float a, float b) {
@@ -94,8 +87,7 @@ void main() {
     // of the first slice a ray meets, the piece from the entry
     vec4 back = segmentColor(origin, dir, t, far_inside ? t_far : range.y);
     if (!near_inside) {
-        vec4 front = segmentColor(origin, dir, range.x, t);
-        back = front + (1.0 - front.a) * back;
+        back = over(segmentColor(origin, dir, range.x, t), back);
     }
     f_color = back;
 #endif
