@@ -233,7 +233,7 @@ def run(args, err=sys.stderr):
     from .reference.exact import exact as exact_image
 
     size = args.size
-    names = [n.strip() for n in args.datasets.split(",") if n.strip()]
+    names = [n.strip() for n in (args.datasets or "chest,head").split(",") if n.strip()]
     steps = [float(s) for s in args.steps.split(",") if s.strip()]
 
     peer = None
@@ -323,7 +323,7 @@ def run_slicing(args, err=sys.stderr):
     from .techniques.slice2d import stack_axis
 
     size = args.size
-    names = [n.strip() for n in args.datasets.split(",") if n.strip()]
+    names = [n.strip() for n in (args.datasets or "chest,head").split(",") if n.strip()]
     sets = _load_datasets(names, args.chest, err)
     configs = slicing_configs()
     ks = sorted({c[3] for c in configs})
@@ -528,7 +528,7 @@ SLICING_CSV_FIELDS = ("dataset", "width", "height", "renderer", "kind", "interpo
                       "psnr", "time_vs_raycast", "rmse_vs_raycast")
 
 
-def write_results(rows, info, out, fields=CSV_FIELDS):
+def write_results(rows, info, out, fields=CSV_FIELDS, figure=None):
     csv_path, json_path, png_path = output_paths(out)
     csv_path.parent.mkdir(parents=True, exist_ok=True)
     buf = io.StringIO()
@@ -543,7 +543,7 @@ def write_results(rows, info, out, fields=CSV_FIELDS):
 
     doc = {"info": info, "rows": [{k: clean(v) for k, v in r.items()} for r in rows]}
     atomic_write(json_path, json.dumps(doc, indent=1, default=str).encode())
-    atomic_write(png_path, figure_png(rows, info))
+    atomic_write(png_path, (figure or figure_png)(rows, info))
     return csv_path, json_path, png_path
 
 
@@ -591,8 +591,9 @@ def add_arguments(parser):
                         help="a small, fast run for a smoke test (64x64, 2 frames)")
     parser.add_argument("--out", default=None,
                         help="write <OUT>.csv, <OUT>.json and <OUT>.png (OUT a stem or an existing folder)")
-    parser.add_argument("--datasets", default="chest,head",
-                        help="comma-separated: chest (vtk.js LIDC2 CT), head (bundled CT head); default both")
+    parser.add_argument("--datasets", default=None,
+                        help="comma-separated: chest (vtk.js LIDC2 CT), head (bundled CT head); default both. "
+                             "Mesh suite: bluntfin, combustor, loxpost, ball; default all four")
     parser.add_argument("--steps", default=",".join(f"{s:g}" for s in STEPS_VOXELS),
                         help="comma-separated ray steps in voxels (the smallest spacing); default 1,0.5,0.25")
     parser.add_argument("--chest", default=None,
@@ -601,10 +602,16 @@ def add_arguments(parser):
     parser.add_argument("--no-vtk", action="store_true", help="leave VTK out")
     parser.add_argument("--textures", action="store_true",
                         help="also measure trilinear sampling throughput of float32, float16 and unorm8 textures")
-    parser.add_argument("--suite", choices=("peer", "slicing"), default="peer",
+    parser.add_argument("--suite", choices=("peer", "slicing", "mesh"), default="peer",
                         help="peer: the ray caster beside VTK (default); slicing: slice2d (k = 0, 1, 3), "
                              "slice3d (cpu and vertex proxies) and the ray caster at equal sample "
-                             "distance, each with and without pre-integration")
+                             "distance, each with and without pre-integration; mesh: projected "
+                             "tetrahedra (MPVO and centroid sort) beside VTK's on the NASA meshes "
+                             "and the Delaunay ball (--datasets bluntfin,combustor,loxpost,ball)")
+    parser.add_argument("--error-size", type=int, default=None,
+                        help="mesh suite: image size of the error measurement (default 128; 32 with --quick)")
+    parser.add_argument("--data-dir", default=None,
+                        help=f"mesh suite: the shared data folder (default $DVR_GL_DATA or {DEFAULT_DATA_DIR})")
     parser.add_argument("--vtk-float", action="store_true",
                         help="give VTK the samples as float32 instead of their own type")
     return parser
@@ -626,6 +633,13 @@ def run_bench(args) -> int:
     if not steps or any(not (s > 0 and math.isfinite(s)) for s in steps):
         print(f"dvr-gl bench: --steps must be positive, got {args.steps!r}", file=sys.stderr)
         return 2
+    if args.datasets is None:
+        args.datasets = "bluntfin,combustor,loxpost,ball" if args.suite == "mesh" else "chest,head"
+    if args.suite == "mesh":
+        from .bench_mesh import run_mesh_bench
+        if args.error_size is None:
+            args.error_size = 32 if args.quick else 128
+        return run_mesh_bench(args)
     if args.suite == "slicing":
         rows, info = run_slicing(args)
         print(f"dvr_gl: {info['dvr_gl'].get('renderer')} ({info['dvr_gl'].get('backend')}); "

@@ -3,6 +3,7 @@ PNG, and a table of frame time and error against the exact image."""
 
 from __future__ import annotations
 
+import inspect
 import os
 import statistics
 import sys
@@ -12,7 +13,7 @@ import numpy as np
 
 from . import data, metrics, reference
 from .scene import Camera, Scene, default_camera
-from .techniques import for_scene
+from .techniques import for_scene, get_technique
 
 TILE = 192  # pixels; small enough that the exact images take seconds, not minutes
 
@@ -28,8 +29,9 @@ def head_front_camera(head, fov=30.0, zoom=1.15):
 
 
 def demo_scenes(size=TILE):
-    """(title, scene) pairs: the bundled CT head in three modes and the synthetic field."""
-    head, field = data.ct_head(), data.synthetic()
+    """(title, scene) pairs: the bundled CT head in three modes, the synthetic field, and
+    the same field on a Delaunay-tetrahedralised ball of scattered points."""
+    head, field, ball = data.ct_head(), data.synthetic(), data.delaunay_ball()
     head_cam = head_front_camera(head)
     field_cam = default_camera(field, azimuth=25, elevation=20, zoom=1.2)
     return [
@@ -38,6 +40,7 @@ def demo_scenes(size=TILE):
         ("CT head, bone isosurface", Scene(head, data.ct_head_tf(), head_cam, size, size,
                                            mode="isosurface", iso_value=1250.0)),
         ("synthetic, composite", Scene(field, data.synthetic_tf(), field_cam, size, size)),
+        ("Delaunay ball, composite", Scene(ball, data.synthetic_tf(), field_cam, size, size)),
     ]
 
 
@@ -64,7 +67,9 @@ def run_demo(out_dir="dvr-gl-demo", preintegrate=False) -> int:
         for title, scene in demo_scenes():
             exact = reference.exact(scene)
             for technique in for_scene(scene):
-                options = {"preintegrate": True} if preintegrate and scene.mode == "composite" else {}
+                takes = inspect.signature(get_technique(technique).make_plan).parameters
+                options = ({"preintegrate": True} if preintegrate and scene.mode == "composite"
+                           and "preintegrate" in takes else {})
                 image, seconds = _time_frames(renderer, scene, technique, **options)
                 err = metrics.compare(image, exact)
                 rows.append((title, technique, seconds * 1e3, err["rmse"], err["max_abs"], err["psnr"]))

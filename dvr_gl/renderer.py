@@ -47,6 +47,7 @@ class Renderer:
         self._vbos = {}
         self._vaos = {}
         self.tables = TableCache()
+        self._resources = {}  # kind -> LRU: what techniques keep on the GPU (see resource)
         self._released = False
         self._idle_fbo = idle_framebuffer(self.ctx)  # bound before any target is released
 
@@ -63,7 +64,7 @@ class Renderer:
         self._released = True
         with current(self.ctx):
             for cache in (self._volumes, self._tfs, self._occupancy, self._masks, self._targets, self._stacks,
-                          self._preint):
+                          self._preint, *self._resources.values()):
                 cache.release()
             streams = [obj for pair in self._streams.values() for obj in pair[1:]]
             for obj in list(self._small.values()) + list(self._vaos.values()) + list(self._vbos.values()) + streams:
@@ -99,6 +100,21 @@ class Renderer:
         return tech.draw(self, plan)
 
     # -- resources (used by techniques) -------------------------------------------------
+    def resource(self, kind, *objects, make, capacity=2):
+        """What a technique keeps on the GPU for some scene objects (a mesh's textures, a
+        TF's table): ``make()`` once while those objects stay among the ``capacity``
+        most recent of this kind, released (if it has ``release``) when dropped and with
+        the renderer. Objects are keyed by identity (scene objects are immutable)."""
+        cache = self._resources.get(kind)
+        if cache is None:
+            cache = self._resources[kind] = LRU(capacity)
+
+        def logged():
+            value = make()
+            self.created.append((kind, tuple(type(o).__name__ for o in objects)))
+            return value
+        return cache.get(_Key(kind, *objects), logged)
+
     def _texture3d(self, kind, array, components, dtype, linear):
         nz, ny, nx = array.shape[:3]
         tex = self.ctx.texture3d((nx, ny, nz), components, np.ascontiguousarray(array).tobytes(), dtype=dtype)

@@ -156,6 +156,134 @@ class Volume:
                 f"origin={tuple(self.origin.tolist())}, range={self.data_range})")
 
 
+class TetMesh:
+    """An unstructured tetrahedral mesh with one scalar per point.
+
+    Parameters
+    ----------
+    points : (N, 3) finite floats, world units
+    tets : (M, 4) integer indices into ``points``; either vertex orientation
+    scalars : (N,) finite floats, the field's value at each point
+
+    Inside each tetrahedron the field is the linear (barycentric) interpolant; the domain
+    is the union of the tetrahedra and need not be convex. Tetrahedra of zero volume are
+    kept (they contribute nothing). Arrays are copied and stored read-only; the
+    connectivity and plane equations renderers need are derived once, on first use
+    (``dvr_gl.mesh.topology``).
+    """
+
+    def __init__(self, points, tets, scalars):
+        pts = _array("points", points, np.float64)
+        if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) < 4:
+            raise ValueError(f"points must have shape (N, 3) with N >= 4, got shape {pts.shape}")
+        if not np.all(np.isfinite(pts)):
+            bad = int(np.argwhere(~np.isfinite(pts))[0, 0])
+            raise ValueError(f"points must be finite, point {bad} is {tuple(pts[bad].tolist())}")
+        raw = np.asarray(tets)
+        if raw.dtype.kind not in "iu":
+            raise TypeError(f"tets must be integer indices, got dtype {raw.dtype}")
+        tt = np.array(raw, dtype=np.int64, order="C")
+        if tt.ndim != 2 or tt.shape[1] != 4 or len(tt) < 1:
+            raise ValueError(f"tets must have shape (M, 4) with M >= 1, got shape {tt.shape}")
+        out = (tt < 0) | (tt >= len(pts))
+        if out.any():
+            i, j = (int(v) for v in np.argwhere(out)[0])
+            raise ValueError(f"tets[{i}] has index {int(tt[i, j])} out of range for {len(pts)} points")
+        if np.any(np.sort(tt, axis=1)[:, 1:] == np.sort(tt, axis=1)[:, :-1]):
+            i = int(np.flatnonzero((np.sort(tt, axis=1)[:, 1:] == np.sort(tt, axis=1)[:, :-1]).any(axis=1))[0])
+            raise ValueError(f"tets[{i}] repeats a vertex: {tt[i].tolist()}")
+        sc = _array("scalars", scalars, np.float64)
+        if sc.shape != (len(pts),):
+            raise ValueError(f"scalars must have shape ({len(pts)},), one per point, got shape {sc.shape}")
+        if not np.all(np.isfinite(sc)):
+            bad = int(np.flatnonzero(~np.isfinite(sc))[0])
+            raise ValueError(f"scalars must be finite, scalars[{bad}] is {sc[bad].item()!r}")
+        for a in (pts, tt, sc):
+            a.setflags(write=False)
+        self.points, self.tets, self.scalars = pts, tt, sc
+        self.data_range = (float(sc.min()), float(sc.max()))
+        self.has_nonfinite = False
+        self._digest = None
+        self._derived = {}
+
+    @classmethod
+    def from_points(cls, points, scalars):
+        """The Delaunay tetrahedralisation of scattered points (``scipy.spatial.Delaunay``;
+        Qhull's ``Qbb Qc Qz Q12`` options, so co-spherical points are handled and every
+        input point is a vertex). Slivers Qhull leaves on the hull are kept: zero-volume
+        cells are harmless."""
+        from scipy.spatial import Delaunay
+        pts = _array("points", points, np.float64)
+        if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) < 4:
+            raise ValueError(f"points must have shape (N, 3) with N >= 4, got shape {pts.shape}")
+        if not np.all(np.isfinite(pts)):
+            bad = int(np.argwhere(~np.isfinite(pts))[0, 0])
+            raise ValueError(f"points must be finite, point {bad} is {tuple(pts[bad].tolist())}")
+        try:
+            tri = Delaunay(pts, qhull_options="Qbb Qc Qz Q12")
+        except Exception as e:  # Qhull raises its own error type for flat input
+            raise ValueError(f"points cannot be tetrahedralised (all on a plane or line?): {e}") from None
+        return cls(pts, tri.simplices, scalars)
+
+    @property
+    def n_points(self):
+        return len(self.points)
+
+    @property
+    def n_tets(self):
+        return len(self.tets)
+
+    @property
+    def bounds(self):
+        """(lower corner, upper corner) of the points' bounding box, world units."""
+        lo, hi = self.points.min(axis=0), self.points.max(axis=0)
+        return lo, hi
+
+    @property
+    def origin(self):
+        return self.bounds[0]
+
+    @property
+    def extent(self):
+        lo, hi = self.bounds
+        return hi - lo
+
+    @property
+    def cell_size(self):
+        """The median edge length: the scale of one cell (a TF's default unit distance)."""
+        if "cell_size" not in self._derived:
+            p = self.points[self.tets]
+            e = np.linalg.norm(p[:, [1, 2, 3, 2, 3, 3]] - p[:, [0, 0, 0, 1, 1, 2]], axis=-1)
+            self._derived["cell_size"] = float(np.median(e)) or float(np.linalg.norm(self.extent)) or 1.0
+        return self._derived["cell_size"]
+
+    def signed_volumes(self):
+        """Signed volume of every tetrahedron, float64 (M,)."""
+        p = self.points[self.tets]
+        a, b, c = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0], p[:, 3] - p[:, 0]
+        return np.einsum("ij,ij->i", a, np.cross(b, c)) / 6.0
+
+    def digest(self):
+        """A content hash (points, tets, scalars) for caches on disk."""
+        if self._digest is None:
+            h = hashlib.sha256()
+            for a in (self.points, self.tets, self.scalars):
+                h.update(str(a.shape).encode())
+                h.update(a.tobytes())
+            self._digest = h.hexdigest()
+        return self._digest
+
+    def __repr__(self):
+        return f"TetMesh({self.n_points} points, {self.n_tets} tets, range={self.data_range})"
+
+
+def _array(name, value, dtype):
+    try:
+        return np.array(value, dtype=dtype, order="C")
+    except (TypeError, ValueError):
+        raise TypeError(f"{name} must be an array of numbers, got {type(value).__name__}") from None
+
+
 def _control_points(name, points, width):
     try:
         arr = np.array(points, dtype=np.float64)
@@ -296,12 +424,14 @@ class Camera:
 
 
 class Scene:
-    """What to render: a volume, its classification, a camera, an image size and a mode."""
+    """What to render: a volume (a ``Volume`` grid or a ``TetMesh``), its classification,
+    a camera, an image size and a mode."""
 
     def __init__(self, volume, tf, camera, width=512, height=512, mode="composite",
                  iso_value=None, shading=False, phong=(0.3, 0.7, 0.2, 32.0)):
-        for name, value, cls in (("volume", volume, Volume), ("tf", tf, TransferFunction),
-                                 ("camera", camera, Camera)):
+        if not isinstance(volume, (Volume, TetMesh)):
+            raise TypeError(f"volume must be a dvr_gl.Volume or dvr_gl.TetMesh, got {type(volume).__name__}")
+        for name, value, cls in (("tf", tf, TransferFunction), ("camera", camera, Camera)):
             if not isinstance(value, cls):
                 raise TypeError(f"{name} must be a dvr_gl.{cls.__name__}, got {type(value).__name__}")
         for name, value in (("width", width), ("height", height)):
@@ -339,6 +469,11 @@ class Scene:
         self.phong = phong
 
     @property
+    def is_mesh(self):
+        """True when the scene's data is a TetMesh (rendered by cell projection)."""
+        return isinstance(self.volume, TetMesh)
+
+    @property
     def shaded(self):
         """True when samples are lit (isosurface mode always is)."""
         return self.shading or self.mode == "isosurface"
@@ -366,7 +501,7 @@ class Scene:
 
 
 def default_camera(volume, azimuth=0.0, elevation=0.0, zoom=1.0, fov=30.0, ortho=False):
-    """A camera looking at the centre of the volume's box along -z with +y up, far enough
+    """A camera looking at the centre of the volume's (or mesh's) box along -z with +y up, far enough
     that the box's bounding sphere fits the view; ``azimuth`` turns it about +y and then
     ``elevation`` about the camera's right axis (degrees); ``zoom`` > 1 moves closer."""
     zoom = _finite_number("zoom", zoom, positive=True)

@@ -113,7 +113,7 @@ def test_camera_rays_through_pixel_centres():
 
 
 @pytest.mark.parametrize("kwargs,exc,message", [
-    (dict(volume=DATA), TypeError, "volume must be a dvr_gl.Volume, got ndarray"),
+    (dict(volume=DATA), TypeError, "volume must be a dvr_gl.Volume or dvr_gl.TetMesh, got ndarray"),
     (dict(tf={"color": []}), TypeError, "tf must be a dvr_gl.TransferFunction, got dict"),
     (dict(camera=None), TypeError, "camera must be a dvr_gl.Camera, got NoneType"),
     (dict(width=0), ValueError, "width must be between 1 and 16384 pixels, got 0"),
@@ -175,3 +175,53 @@ def test_render_inside_an_entered_context_reads_back_the_image(renderer):
     assert np.isfinite(inner).all() and plain[..., 3].max() > 0
     np.testing.assert_array_equal(inner, plain)
     np.testing.assert_array_equal(again, plain)
+
+
+# -- TetMesh -------------------------------------------------------------------------------
+_PTS = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1]], float)
+_TETS = np.array([[0, 1, 2, 3], [1, 2, 3, 4]])
+_VALS = np.arange(5.0)
+
+
+@pytest.mark.parametrize("points, tets, scalars, exc, text", [
+    (_PTS[:, :2], _TETS, _VALS, ValueError, r"points must have shape \(N, 3\)"),
+    (np.where(_PTS == 1, np.nan, _PTS), _TETS, _VALS, ValueError, "points must be finite, point 1"),
+    (_PTS, _TETS.astype(float), _VALS, TypeError, "tets must be integer indices, got dtype float64"),
+    (_PTS, _TETS[:, :3], _VALS, ValueError, r"tets must have shape \(M, 4\)"),
+    (_PTS, np.array([[0, 1, 2, 5]]), _VALS, ValueError, r"tets\[0\] has index 5 out of range for 5 points"),
+    (_PTS, np.array([[0, 1, -1, 2]]), _VALS, ValueError, r"tets\[0\] has index -1 out of range"),
+    (_PTS, np.array([[0, 1, 2, 2]]), _VALS, ValueError, r"tets\[0\] repeats a vertex"),
+    (_PTS, _TETS, _VALS[:4], ValueError, r"scalars must have shape \(5,\)"),
+    (_PTS, _TETS, np.array([0, 1, np.inf, 3, 4.0]), ValueError, r"scalars\[2\] is inf"),
+    (_PTS, _TETS, "abc", TypeError, "scalars must be an array of numbers"),
+])
+def test_tetmesh_rejects(points, tets, scalars, exc, text):
+    with pytest.raises(exc, match=text):
+        dvr_gl.TetMesh(points, tets, scalars)
+
+
+def test_tetmesh_keeps_either_orientation_and_flat_cells():
+    flipped = np.array([[0, 2, 1, 3], [1, 2, 3, 4]])
+    m = dvr_gl.TetMesh(_PTS, flipped, _VALS)
+    vols = m.signed_volumes()
+    assert vols[0] < 0 < vols[1]
+    flat = dvr_gl.TetMesh(np.vstack([_PTS, [[0.5, 0.5, 0]]]), [[0, 1, 2, 5]], np.arange(6.0))
+    assert flat.signed_volumes()[0] == 0
+    assert m.data_range == (0.0, 4.0) and m.n_tets == 2 and m.n_points == 5
+    assert not m.points.flags.writeable and not m.tets.flags.writeable
+    lo, hi = m.bounds
+    assert np.array_equal(lo, [0, 0, 0]) and np.array_equal(hi, [1, 1, 1])
+    assert m.digest() != flat.digest()
+    scene = dvr_gl.Scene(m, dvr_gl.TransferFunction([(0, 1, 1, 1)], [(0, 0.5)]), dvr_gl.default_camera(m))
+    assert scene.is_mesh and scene.digest() == scene.replace().digest()
+
+
+def test_tetmesh_from_points_delaunay():
+    rng = np.random.default_rng(0)
+    pts = rng.random((60, 3))
+    m = dvr_gl.TetMesh.from_points(pts, pts[:, 0])
+    # Delaunay fills the convex hull exactly
+    from scipy.spatial import ConvexHull
+    assert abs(np.abs(m.signed_volumes()).sum() - ConvexHull(pts).volume) < 1e-12
+    with pytest.raises(ValueError, match="cannot be tetrahedralised"):
+        dvr_gl.TetMesh.from_points(np.c_[pts[:, :2], np.zeros(60)], pts[:, 0])

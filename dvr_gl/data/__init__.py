@@ -7,12 +7,15 @@
   torus (peak 1.0), a Gaussian blob in its hole (peak 0.6) and a smaller one outside it
   (peak 0.35). The world box is always ``[0, 63]^3``, whatever ``n``: a finer grid samples
   the same continuous field, so resolution studies compare like with like.
+- :func:`delaunay_ball` -- the same field on scattered points in the ball inscribed in
+  that box, tetrahedralised by Delaunay: an unstructured mesh (4,000 points, about 24,000
+  tetrahedra by default) for the projected-tetrahedra technique.
 
 Each comes with a default transfer function in data units whose unit distance is one
 voxel: the smallest spacing of the head (1.5), and 1.0 for the synthetic box (one voxel
 at the default ``n = 64``).
 
-Volumes are cached: calling :func:`ct_head` twice returns the same immutable object, so
+Volumes and meshes are cached: calling :func:`ct_head` twice returns the same immutable object, so
 renderers that cache GPU resources by identity upload it once.
 """
 
@@ -136,3 +139,26 @@ def synthetic_tf() -> TransferFunction:
         opacity=[(0.10, 0.0), (0.25, 0.02), (0.34, 0.30), (0.42, 0.02),
                  (0.55, 0.05), (0.60, 0.30), (0.68, 0.05), (0.90, 0.20), (1.00, 0.80)],
         unit_distance=1.0)
+
+
+def delaunay_ball(n_points: int = 4000, seed: int = 0):
+    """The synthetic field on scattered points: ``n_points`` points in the ball inscribed
+    in the synthetic box (radius 31.5 about its centre; a fifth of them on the sphere),
+    drawn from ``numpy.random.default_rng(seed)``, tetrahedralised by Delaunay
+    (``TetMesh.from_points``), scalars :func:`synthetic_field`. Render it with
+    :func:`synthetic_tf`."""
+    if isinstance(n_points, bool) or not isinstance(n_points, (int, np.integer)) or n_points < 8:
+        raise ValueError(f"n_points must be an integer >= 8, got {n_points!r}")
+    return _delaunay_ball(int(n_points), int(seed))
+
+
+@functools.lru_cache(maxsize=2)
+def _delaunay_ball(n, seed):
+    from ..scene import TetMesh
+    rng = np.random.default_rng(seed)
+    direction = rng.normal(size=(n, 3))
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    radius = SYNTHETIC_EXTENT / 2 * np.where(np.arange(n) < n // 5, 1.0, rng.random(n) ** (1 / 3))
+    points = _CENTRE + direction * radius[:, None]
+    return TetMesh.from_points(points, synthetic_field(*points.T))
+

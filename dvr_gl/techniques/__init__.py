@@ -1,15 +1,15 @@
 """The techniques, by name. Each module offers ``make_plan(scene, step, **options)`` (the
 plan the GL path and the NumPy reference share), ``draw(renderer, plan)`` (renders into
 ``renderer.target(...)`` and returns that framebuffer), ``MODES`` (the scene modes it
-renders) and ``TAKES_STEP`` (whether ``step`` is an option); the reference of the same
-name lives in ``dvr_gl.reference``."""
+renders), ``TAKES_STEP`` (whether ``step`` is an option) and ``DATA`` ("volume" for grids,
+"mesh" for TetMesh scenes); the reference of the same name lives in ``dvr_gl.reference``."""
 
 from __future__ import annotations
 
 import importlib
 
 _MODULES = {"raycast": "dvr_gl.techniques.raycast", "slice2d": "dvr_gl.techniques.slice2d",
-            "slice3d": "dvr_gl.techniques.slice3d"}
+            "slice3d": "dvr_gl.techniques.slice3d", "tetra": "dvr_gl.techniques.tetra"}
 
 
 def names():
@@ -18,7 +18,9 @@ def names():
 
 def for_scene(scene):
     """The names of the techniques that can render ``scene`` (its data and its mode)."""
-    return tuple(n for n in _MODULES if scene.mode in get_technique(n).MODES)
+    kind = "mesh" if scene.is_mesh else "volume"
+    return tuple(n for n in _MODULES
+                 if scene.mode in get_technique(n).MODES and get_technique(n).DATA == kind)
 
 
 def get_technique(name):

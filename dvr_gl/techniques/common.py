@@ -13,9 +13,15 @@ from ..scene import Scene
 TARGETS = {"rgba32f": "f4", "rgba16f": "f2", "rgba8": "f1"}
 
 
-def check_scene(scene, technique, modes=None):
+def check_scene(scene, technique, modes=None, data="volume"):
+    """The scene is a Scene of the data kind the technique renders ("volume": a grid,
+    "mesh": a TetMesh) in one of its modes."""
     if not isinstance(scene, Scene):
         raise TypeError(f"scene must be a dvr_gl.Scene, got {type(scene).__name__}")
+    if data == "volume" and scene.is_mesh:
+        raise ValueError(f"{technique} renders a Volume (a grid); this scene holds a TetMesh: use technique 'tetra'")
+    if data == "mesh" and not scene.is_mesh:
+        raise ValueError(f"{technique} renders a TetMesh; this scene holds a Volume: use raycast, slice2d or slice3d")
     if modes is not None and scene.mode not in modes:
         raise ValueError(f"{technique} renders mode {' or '.join(repr(m) for m in modes)}, "
                          f"got mode {scene.mode!r}")

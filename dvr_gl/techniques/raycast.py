@@ -61,6 +61,7 @@ BRICK = 8            # brick edge in cells, for empty-space skipping
 JITTER_TABLE = 64    # jitter table edge in pixels
 
 MODES = ("composite", "mip", "minip", "average", "isosurface")
+DATA = "volume"
 TAKES_STEP = True
 
 @dataclass

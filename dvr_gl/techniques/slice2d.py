@@ -56,6 +56,7 @@ from .common import (TARGETS, add_optional_inputs, bind, box_depth_range, camera
 INFLATE = 1e-3  # slice quads are grown by this fraction of the box diagonal
 
 MODES = ("composite",)
+DATA = "volume"
 TAKES_STEP = False
 
 @dataclass

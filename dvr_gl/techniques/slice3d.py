@@ -60,6 +60,7 @@ PROXIES = ("cpu", "vertex")
 INFLATE = 1e-3  # proxy polygons are cut from the box grown by this fraction of its diagonal
 
 MODES = ("composite",)
+DATA = "volume"
 TAKES_STEP = True
 
 @dataclass

@@ -1,0 +1,236 @@
+"""``dvr-gl bench --suite mesh``: projected tetrahedra beside VTK's
+``vtkProjectedTetrahedraMapper`` on real CFD meshes, speed and error in one run.
+
+Data sets: the NASA blunt fin (187,395 tets), combustor (215,040) and LOX post (513,375)
+from the project's shared data folder, and the bundled Delaunay ball
+(``dvr_gl.data.delaunay_ball``), each with :func:`mesh_tf` and an oblique camera.
+
+Per data set and renderer:
+
+- frame time at ``--size`` (default 512) for a *new view each frame* (the camera turns by
+  0.5 degree between frames, so both renderers sort again every frame, as a user turning
+  the mesh sees it), median of ``--repeats`` frames after one warm-up; each frame ends
+  with the float image read back. dvr_gl's frame is split into its parts: the visibility
+  sort (CPU, ``sort ms``) and projection + draw + read-back (GPU, ``draw ms``);
+- RMSE, largest error and PSNR against ``reference.exact`` at ``--error-size`` (default
+  128), with the same camera.
+
+Renderers: dvr_gl ``tetra`` with ``sort="mpvo"`` and with ``sort="centroid"``, and VTK's
+projected tetrahedra (its default cell-centre depth sort); VTK is left out when it is
+not installed. ``t/VTK`` and ``err/VTK`` divide by VTK's row of the same data set.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import statistics
+import sys
+import time
+
+import numpy as np
+
+from . import metrics
+from .bench import DEFAULT_DATA_DIR, Progress, _fmt, _machine, write_results
+from .scene import Camera, Scene, TetMesh, TransferFunction, default_camera
+
+MESHES = {  # name -> (file under the shared data folder, scalar array)
+    "bluntfin": (os.path.join("nasa_bluntfin", "bluntfin_tets.npz"), "Density"),
+    "combustor": (os.path.join("nasa_combustor", "comb_tets.npz"), "Density"),
+    "loxpost": (os.path.join("nasa_lox_post", "post_tets.npz"), "StagnationEnergy"),
+    "ball": (None, None),
+}
+CSV_FIELDS = ["dataset", "tets", "drawn", "renderer", "width", "sort_ms", "draw_ms", "ms_median", "ms_min",
+              "error_size", "rmse", "max_abs", "psnr", "time_vs_vtk", "rmse_vs_vtk", "cycles_broken",
+              "gap_constraints"]
+
+
+def load_mesh_dataset(name, data_dir=None):
+    """(mesh, tf) of a named data set."""
+    if name not in MESHES:
+        raise ValueError(f"unknown mesh data set {name!r}; choose from {', '.join(MESHES)}")
+    if name == "ball":
+        from .data import delaunay_ball, synthetic_tf
+        return delaunay_ball(), synthetic_tf()
+    path, scalars = MESHES[name]
+    directory = data_dir or os.environ.get("DVR_GL_DATA") or DEFAULT_DATA_DIR
+    full = os.path.join(directory, path)
+    if not os.path.exists(full):
+        raise FileNotFoundError(f"{full} not found (set $DVR_GL_DATA to the shared data folder)")
+    z = np.load(full)
+    mesh = TetMesh(z["points"], z["tets"], z[scalars])
+    return mesh, mesh_tf(mesh)
+
+
+def mesh_tf(mesh):
+    """Blue to green to red over the 2nd to 98th percentile of the scalars, opacity rising
+    from 0 with a band at two thirds; unit distance 1/40 of the bounding-box diagonal, so
+    that the whole mesh is semi-transparent."""
+    lo, hi = (float(v) for v in np.percentile(mesh.scalars, [2, 98]))
+    if hi <= lo:
+        hi = lo + 1.0
+    at = lambda f: lo + f * (hi - lo)   # noqa: E731
+    return TransferFunction(
+        color=[(at(0.0), 0.15, 0.3, 0.9), (at(0.5), 0.2, 0.85, 0.3), (at(1.0), 0.95, 0.25, 0.1)],
+        opacity=[(at(0.0), 0.0), (at(0.55), 0.15), (at(0.67), 0.6), (at(0.8), 0.2), (at(1.0), 0.5)],
+        unit_distance=float(np.linalg.norm(mesh.extent)) / 40)
+
+
+def _camera(mesh, turn=0.0):
+    return default_camera(mesh, azimuth=30.0 + turn, elevation=20.0)
+
+
+def _time_dvr_gl(gl, scene, sort, repeats, on_frame):
+    """Median (sort, draw + read-back, total) seconds over frames each from a new view."""
+    from .techniques import tetra
+    sorts, draws, totals = [], [], []
+    image = None
+    for i in range(-1, repeats):
+        s = scene.replace(camera=_camera(scene.volume, 0.5 * (i + 1)))
+        t0 = time.perf_counter()
+        plan = tetra.make_plan(s, sort=sort, tables=gl.tables)
+        t1 = time.perf_counter()
+        with _current(gl):
+            fbo = tetra.draw(gl, plan)
+            image = gl.read_target(fbo, s.width, s.height)
+        t2 = time.perf_counter()
+        if i >= 0:
+            sorts.append(t1 - t0)
+            draws.append(t2 - t1)
+            totals.append(t2 - t0)
+        on_frame()
+    return image, plan, statistics.median(sorts), statistics.median(draws), totals
+
+
+def _current(gl):
+    from .gl.context import current
+    return current(gl.ctx)
+
+
+def run_mesh(args, err=sys.stderr):
+    """Run the suite; returns (rows, info)."""
+    import dvr_gl
+    from .reference.exact import exact as exact_image
+
+    names = [n.strip() for n in args.datasets.split(",") if n.strip()]
+    peer, vtk_note = None, None
+    if not args.no_vtk:
+        try:
+            from . import vtk_peer
+            peer = vtk_peer
+            vtk_peer._import_vtk()
+        except ImportError as e:
+            peer = None
+            vtk_note = f"VTK not available ({e}); VTK rows skipped"
+            print(f"dvr-gl bench: {vtk_note}", file=err)
+    renderers = [("dvr_gl tetra mpvo", "mpvo"), ("dvr_gl tetra centroid", "centroid")]
+    if peer is not None:
+        renderers.append(("VTK projected tetrahedra", "vtk"))
+    frames = 1 + args.repeats
+    progress = Progress(len(names) * (2 + len(renderers) * (frames + 1)), stream=err)
+    rows, info = [], {}
+    try:
+        with dvr_gl.Renderer(backend=args.backend) as gl:
+            info["dvr_gl"] = gl.info()
+            for name in names:
+                progress.begin(f"{name}: loading")
+                try:
+                    mesh, tf = load_mesh_dataset(name, args.data_dir)
+                except FileNotFoundError as e:
+                    print(f"dvr-gl bench: skipping {name}: {e}", file=err)
+                    continue
+                progress.advance(f"{name}: loaded")
+                scene = Scene(mesh, tf, _camera(mesh), args.size, args.size)
+                small = scene.replace(width=args.error_size, height=args.error_size)
+                progress.begin(f"{name}: exact image")
+                exact = exact_image(small)
+                progress.advance(f"{name}: exact image")
+                for label, sort in renderers:
+                    tick = lambda: progress.advance(f"{name}: {label}")   # noqa: E731
+                    if sort == "vtk":
+                        image, times = peer.render_vtk_mesh(small, repeats=1, warmup=0)
+                        _, times = peer.render_vtk_mesh(scene, repeats=args.repeats, warmup=1,
+                                                        turn=lambda i: _camera(mesh, 0.5 * (i + 1)))
+                        for _ in range(frames):
+                            tick()
+                        row = dict(sort_ms=None, draw_ms=None, cycles_broken=None, gap_constraints=None,
+                                   drawn=None)
+                    else:
+                        _, _, ts, td, times = _time_dvr_gl(gl, scene, sort, args.repeats, tick)
+                        image = gl.render(small, technique="tetra", sort=sort)
+                        from .techniques import tetra
+                        plan = tetra.make_plan(scene, sort=sort, tables=gl.tables)
+                        row = dict(sort_ms=1e3 * ts, draw_ms=1e3 * td, cycles_broken=plan.order.cycles_broken,
+                                   gap_constraints=plan.order.gap_constraints, drawn=int(plan.draw.size))
+                    e = metrics.compare(image, exact)
+                    progress.advance(f"{name}: {label} error")
+                    row.update(dataset=name, tets=mesh.n_tets, renderer=label, width=args.size,
+                               ms_median=1e3 * statistics.median(times), ms_min=1e3 * min(times),
+                               error_size=args.error_size, rmse=e["rmse"], max_abs=e["max_abs"],
+                               psnr=e["psnr"], time_vs_vtk=None, rmse_vs_vtk=None)
+                    rows.append(row)
+    finally:
+        progress.close()
+    vtk = {r["dataset"]: r for r in rows if r["renderer"].startswith("VTK")}
+    for r in rows:
+        v = vtk.get(r["dataset"])
+        if v is not None:
+            r["time_vs_vtk"] = r["ms_median"] / v["ms_median"]
+            r["rmse_vs_vtk"] = r["rmse"] / v["rmse"] if v["rmse"] > 0 else None
+    info.update(_machine(), size=args.size, error_size=args.error_size, repeats=args.repeats, suite="mesh",
+                datasets=names, vtk_note=vtk_note)
+    return rows, info
+
+
+def format_mesh_table(rows):
+    head = ("data", "tets", "renderer", "sort ms", "draw ms", "ms/frame", "RMSE", "max err", "t/VTK", "err/VTK")
+    lines = [(r["dataset"], str(r["tets"]), r["renderer"], _fmt(r["sort_ms"], ".0f"), _fmt(r["draw_ms"], ".0f"),
+              _fmt(r["ms_median"], ".0f"), _fmt(r["rmse"], ".2e"), _fmt(r["max_abs"], ".3f"),
+              _fmt(r["time_vs_vtk"], ".2f"), _fmt(r["rmse_vs_vtk"], ".3f")) for r in rows]
+    widths = [max(len(h), *(len(l[i]) for l in lines)) if lines else len(h) for i, h in enumerate(head)]
+
+    def fmt_line(cells):
+        return "  ".join(c.ljust(w) if i in (0, 2) else c.rjust(w) for i, (c, w) in enumerate(zip(cells, widths)))
+
+    return "\n".join([fmt_line(head), fmt_line(["-" * w for w in widths])] + [fmt_line(l) for l in lines])
+
+
+def figure_png(rows, info) -> bytes:
+    """Error against new-view frame time, log-log, one point per renderer and data set."""
+    import io
+    import matplotlib
+    matplotlib.use("Agg", force=False)
+    from matplotlib.figure import Figure
+    fig = Figure(figsize=(6.5, 4.5), constrained_layout=True)
+    ax = fig.subplots()
+    markers = {"dvr_gl tetra mpvo": ("tab:blue", "o"), "dvr_gl tetra centroid": ("tab:green", "s"),
+               "VTK projected tetrahedra": ("tab:red", "^")}
+    for label, (color, marker) in markers.items():
+        pts = [(r["ms_median"], r["rmse"], r["dataset"]) for r in rows if r["renderer"] == label]
+        if not pts:
+            continue
+        ax.scatter([p[0] for p in pts], [max(p[1], 1e-12) for p in pts], color=color, marker=marker, label=label)
+        for t, e, name in pts:
+            ax.annotate(name, (t, max(e, 1e-12)), textcoords="offset points", xytext=(4, 4), fontsize=7, color=color)
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel(f"median time per frame, new view each frame (ms, {info.get('size')}x{info.get('size')})")
+    ax.set_ylabel(f"RMSE against exact ({info.get('error_size')}x{info.get('error_size')})")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110)
+    return buf.getvalue()
+
+
+def run_mesh_bench(args) -> int:
+    rows, info = run_mesh(args)
+    print(f"dvr_gl: {info['dvr_gl'].get('renderer')} ({info['dvr_gl'].get('backend')}), "
+          f"LP_NUM_THREADS={os.environ.get('LP_NUM_THREADS', 'unset')}; frames at {info['size']}x{info['size']} "
+          f"(a new view each frame, median of {info['repeats']}); error at {info['error_size']}x{info['error_size']} "
+          "against reference.exact")
+    print(format_mesh_table(rows))
+    if args.out:
+        paths = write_results(rows, info, args.out, fields=CSV_FIELDS, figure=figure_png)
+        print("wrote " + ", ".join(str(p) for p in paths))
+    return 0

@@ -1,0 +1,72 @@
+"""NumPy reference of projected tetrahedra: the plan's cells, in the plan's draw order,
+each pixel's segment through each cell found in float64 (``mesh_rays``), integrated with
+the twin of the shader's segment integral (``linear_segment``), blended back to front
+with the over operator into the plan's target (rounded per blend as the target would).
+
+What the GL path leaves to rasterisation is decided here as GL decides it: a pixel whose
+ray lies in a face shared by two cells is covered once (GL's rule gives such a pixel to
+one of the two triangles; both give the same segment), so overlapping coverage of a ray
+is counted once.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .common import blend_over
+from .linear_segment import linear_segment
+from .mesh_rays import ray_tet_segments
+
+
+def covered_once(seg):
+    """Per pixel, drop the part of each segment that an earlier segment (by start)
+    already covers; returns the kept segments with their clipped start and value there."""
+    order = np.lexsort((seg["t0"], seg["pixel"]))
+    pix, cell = seg["pixel"][order], seg["tet"][order]
+    t0, t1, s0, s1 = (seg[k][order] for k in ("t0", "t1", "s0", "s1"))
+    # running maximum of the ends so far, per pixel (a segmented scan by doubling)
+    reach = t1.copy()
+    step = 1
+    while step < reach.size:
+        same = pix[step:] == pix[:-step]
+        if not same.any():
+            break
+        reach[step:] = np.where(same, np.maximum(reach[step:], reach[:-step]), reach[step:])
+        step *= 2
+    before = np.full(reach.size, -np.inf)
+    if reach.size > 1:
+        before[1:] = np.where(pix[1:] == pix[:-1], reach[:-1], -np.inf)
+    start = np.maximum(t0, before)
+    keep = t1 > start
+    with np.errstate(divide="ignore", invalid="ignore"):
+        frac = np.where(t1 > t0, (start - t0) / (t1 - t0), 0.0)
+    s_start = s0 + (s1 - s0) * frac
+    return dict(pixel=pix[keep], tet=cell[keep], t0=start[keep], t1=t1[keep], s0=s_start[keep], s1=s1[keep])
+
+
+def render_plan(plan, lut_exact=False):
+    """(H, W, 4) float64 premultiplied RGBA, row 0 on top. ``lut_exact`` is accepted for
+    the common interface: this technique classifies with the exact TF (its knots) anyway."""
+    scene = plan.scene
+    W, H = scene.width, scene.height
+    out = np.zeros((H * W, 4))
+    if plan.draw.size == 0:
+        return out.reshape(H, W, 4)
+    seg = covered_once(ray_tet_segments(scene, tets=plan.draw))
+    rank = np.full(len(scene.volume.tets), -1, np.int64)
+    rank[plan.draw] = np.arange(plan.draw.size)
+    r = rank[seg["tet"]]
+    order = np.lexsort((r, seg["pixel"]))              # per pixel, in draw order (back first)
+    pix = seg["pixel"][order]
+    rgba = linear_segment(plan.knots, seg["s0"][order], seg["s1"][order], (seg["t1"] - seg["t0"])[order])
+    # layer k of a pixel is its k-th fragment in draw order; blend layer by layer
+    first = np.concatenate([[0], np.flatnonzero(pix[1:] != pix[:-1]) + 1])
+    counts = np.diff(np.concatenate([first, [pix.size]]))
+    layer = np.arange(pix.size) - np.repeat(first, counts)
+    by_layer = np.argsort(layer, kind="stable")
+    bounds = np.searchsorted(layer[by_layer], np.arange(int(counts.max()) + 1))
+    for k in range(int(counts.max())):
+        at = by_layer[bounds[k]:bounds[k + 1]]
+        p = pix[at]
+        out[p] = blend_over(out[p], rgba[at], plan.target)
+    return out.reshape(H, W, 4)

@@ -1,0 +1,277 @@
+"""Projected tetrahedra: cell projection for unstructured tetrahedral meshes.
+
+About this technique
+--------------------
+Per view, the cells are put in back-to-front order (``dvr_gl.mesh``: MPVO with the
+per-pixel treatment of gaps in the domain, or a centroid sort) and drawn in that order,
+each as its four faces with front faces culled. A cell's back faces cover its projected
+silhouette exactly once, like the 3 or 4 triangles of Shirley and Tuchman's
+classification; instead of interpolating a thick vertex's depth and scalars across
+those triangles, each fragment clips its own pixel ray against the cell's four planes,
+which gives the exact front and back distances (under perspective too) and, from the
+cell's linear field, the exact scalars there. The segment is then integrated exactly for
+the piecewise-linear transfer function (``shaders/common/linear_segment.glsl``: closed-form
+optical depth per piece between knots, colour by parts with 8-point Gauss-Legendre), so
+the result is right for any cell size, and GL blends it with the over operator
+(premultiplied, back to front) into a float target.
+
+Classification is thus done on the GPU, per fragment, from per-cell data uploaded once per
+mesh (planes, linear field, points, connectivity); the CPU's only per-view work is the
+order, uploaded as one int32 per cell. The cells whose scalar range has zero opacity are
+left out of the order and the draw (found once per transfer function); zero-volume cells
+are sorted but never drawn.
+
+Cracks and double counting. A shared face's plane is stored once and negated for the
+second cell, so the ray leaves one cell exactly where it enters the next; which cell a
+pixel on a shared edge belongs to is GL's rasterisation rule, the same for every
+triangle sharing that edge.
+
+Options (same names in ``dvr_gl.reference.render``)
+---------------------------------------------------
+sort : "mpvo" (default): visibility order exact at every pixel centre, non-convex
+    domains included; "centroid": cells by centroid distance from the eye (cheaper; its
+    error is measured in the README).
+target : "rgba32f" (default) | "rgba16f" | "rgba8": blending happens in the target.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..cache import TableCache
+from ..mesh import LOCAL_FACES, centroid_order, mpvo_order, topology, visible_cells
+from ..reference.linear_segment import SegmentKnots
+from ..scene import Scene
+from .common import TARGETS, bind, camera_uniforms, check_scene, check_target, eye_view_projection
+
+MODES = ("composite",)
+TAKES_STEP = False
+DATA = "mesh"
+SORTS = ("mpvo", "centroid")
+TEXEL_ROW_WIDTH = 4096
+MAX_KNOTS = 256            # 2 x 256 vec4 uniforms: within every desktop GL's fragment limit
+
+
+@dataclass
+class TetraPlan:
+    scene: Scene
+    knots: SegmentKnots
+    visible: np.ndarray            # cells with non-zero opacity somewhere in their range
+    order: object                  # mesh.Order: cells back to front, cycles, gap constraints
+    draw: np.ndarray               # int32 cells to draw, back to front (no zero-volume cells)
+    sort: str = "mpvo"
+    target: str = "rgba32f"
+    defines: dict = field(default_factory=dict)
+    sort_seconds: float = 0.0      # time spent ordering for this view (0 when cached)
+
+
+def make_plan(scene, step=None, *, sort="mpvo", target="rgba32f", tables=None):
+    """Validate the options and decide what the scene needs. ``tables`` keeps the
+    visible cells (per TF) and the order (per view) between frames."""
+    tables = tables or TableCache()
+    check_scene(scene, "tetra", MODES, data="mesh")
+    if step is not None:
+        raise ValueError(f"tetra takes no step (each cell is integrated exactly), got step={step!r}")
+    if sort not in SORTS:
+        raise ValueError(f"sort must be one of {', '.join(SORTS)}, got {sort!r}")
+    check_target(target)
+    mesh, tf = scene.volume, scene.tf
+    knots = tables.get("segment_knots", tf, make=SegmentKnots)
+    visible = tables.get("visible_cells", mesh, tf, make=visible_cells)
+    timing = {}
+
+    def order(mesh, tf, camera):
+        t0 = time.perf_counter()
+        fn = mpvo_order if sort == "mpvo" else centroid_order
+        result = fn(mesh, visible, scene)
+        timing["sort"] = time.perf_counter() - t0
+        return result
+
+    # the key's objects compare by identity, the string by value (it holds the image size,
+    # on which the per-pixel gap constraints depend)
+    result = tables.get(f"tetra_order:{sort}:{scene.width}x{scene.height}", mesh, tf, scene.camera, make=order)
+    flat = topology(mesh).flat
+    draw = result.cells[~flat[result.cells]].astype(np.int32)
+    defines = {"KNOT_CAPACITY": knot_capacity(knots.count)}
+    if scene.camera.is_ortho:
+        defines["ORTHO"] = 1
+    return TetraPlan(scene=scene, knots=knots, visible=visible, order=result, draw=draw, sort=sort,
+                     target=target, defines=defines, sort_seconds=timing.get("sort", 0.0))
+
+
+def knot_capacity(count):
+    """The uniform arrays' size for a TF of ``count`` knots: the next power of two (at
+    least 4), so that editing a TF rarely compiles a new variant."""
+    if count > MAX_KNOTS:
+        raise ValueError(f"tf has {count} control-point positions; tetra takes at most {MAX_KNOTS}")
+    return max(4, 1 << (count - 1).bit_length())
+
+
+# ---------------------------------------------------------------------------------------
+# GL path
+
+def texture_rows(array):
+    """(n, k) values laid out TEXEL_ROW_WIDTH texels per row (shaders/common/texel_rows.glsl):
+    a (rows, TEXEL_ROW_WIDTH, k) array, the tail padded with zeros."""
+    n, k = array.shape
+    rows = max(1, -(-n // TEXEL_ROW_WIDTH))
+    out = np.zeros((rows * TEXEL_ROW_WIDTH, k), array.dtype)
+    out[:n] = array
+    return out.reshape(rows, TEXEL_ROW_WIDTH, k)
+
+
+def _texture(ctx, array, dtype):
+    rows = texture_rows(np.ascontiguousarray(array))
+    tex = ctx.texture((TEXEL_ROW_WIDTH, rows.shape[0]), rows.shape[2], rows.tobytes(), dtype=dtype)
+    tex.filter = (ctx.NEAREST, ctx.NEAREST)
+    return tex
+
+
+class MeshTextures:
+    """Per-mesh GPU data, uploaded once: points, cells, planes and linear fields."""
+
+    def __init__(self, ctx, mesh):
+        topo = topology(mesh)
+        lo = mesh.bounds[0]
+        pts = np.zeros((mesh.n_points, 4), np.float32)
+        pts[:, :3] = mesh.points - lo
+        planes = topo.cell_planes().reshape(-1, 4).astype(np.float32)
+        field = cell_fields(mesh).reshape(-1, 4).astype(np.float32)
+        self.points = _texture(ctx, pts, "f4")
+        self.tets = _texture(ctx, topo.tets.astype(np.int32), "i4")
+        self.planes = _texture(ctx, planes, "f4")
+        self.field = _texture(ctx, field, "f4")
+        self.bytes = sum(t.width * t.height * t.components * 4 for t in
+                         (self.points, self.tets, self.planes, self.field))
+
+    def release(self):
+        for tex in (self.points, self.tets, self.planes, self.field):
+            tex.release()
+
+
+def cell_fields(mesh):
+    """(M, 2, 4) float64: per cell (gradient of the linear field, value at the centroid)
+    and (centroid, 0), positions relative to the mesh's lower corner. Zero-volume cells
+    get a zero gradient (they are never drawn)."""
+    topo = topology(mesh)
+    lo = mesh.bounds[0]
+    p = mesh.points[topo.tets] - lo                 # (M, 4, 3)
+    s = mesh.scalars[topo.tets]
+    A = p[:, 1:] - p[:, :1]
+    b = s[:, 1:] - s[:, :1]
+    grad = np.zeros((len(p), 3))
+    ok = ~topo.flat
+    grad[ok] = np.linalg.solve(A[ok], b[ok][..., None])[..., 0]
+    out = np.zeros((len(p), 2, 4))
+    out[:, 0, :3] = grad
+    out[:, 0, 3] = s.mean(axis=1)
+    out[:, 1, :3] = p.mean(axis=1)
+    return out
+
+
+class _OrderTexture:
+    """The per-view draw order: one int32 texel per slot, rewritten each frame, grown
+    (never shrunk) as needed."""
+
+    def __init__(self):
+        self.tex = None
+
+    def write(self, ctx, cells):
+        rows = texture_rows(cells.reshape(-1, 1))
+        if self.tex is None or self.tex.height < rows.shape[0]:
+            if self.tex is not None:
+                self.tex.release()
+            self.tex = ctx.texture((TEXEL_ROW_WIDTH, rows.shape[0]), 1, dtype="i4")
+            self.tex.filter = (ctx.NEAREST, ctx.NEAREST)
+        self.tex.write(rows.tobytes(), viewport=(0, 0, TEXEL_ROW_WIDTH, rows.shape[0]))
+        return self.tex
+
+    def release(self):
+        if self.tex is not None:
+            self.tex.release()
+
+
+def projection(scene):
+    """View-projection of mesh-relative positions. No depth test is used, so near and far
+    only clip: near just in front of the eye (perspective) or at the rays' start plane
+    (orthographic), far behind every point."""
+    mesh = scene.volume
+    cam = scene.camera
+    corners = np.array([[x, y, z] for z in (0, 1) for y in (0, 1) for x in (0, 1)]) * mesh.extent
+    depth = (corners - (cam.eye - mesh.bounds[0])) @ cam.forward
+    diag = float(np.linalg.norm(mesh.extent)) or 1.0
+    far = max(float(depth.max()), 0.0) * 1.01 + 1e-3 * diag
+    near = 0.0 if cam.is_ortho else 1e-6 * diag
+    return eye_view_projection(scene, near, far)
+
+
+def draw(renderer, plan):
+    """Render the plan into the renderer's target; returns that framebuffer."""
+    ctx = renderer.ctx
+    scene = plan.scene
+    mesh = scene.volume
+    fbo = renderer.target(scene.width, scene.height, TARGETS[plan.target])
+    fbo.use()
+    fbo.clear(0.0, 0.0, 0.0, 0.0)
+    if plan.draw.size == 0:
+        return fbo
+    prog = renderer.programs.get("tetra/tetra.vert", "tetra/tetra.frag", plan.defines)
+    data = renderer.resource("tetra_mesh", mesh, make=lambda: MeshTextures(ctx, mesh), capacity=1)
+    order = renderer.resource("tetra_order", make=_OrderTexture, capacity=1).write(ctx, plan.draw)
+    textures = {"t_order": order, "t_tets": data.tets, "t_points": data.points, "t_planes": data.planes,
+                "t_field": data.field}
+    uniforms = {**camera_uniforms(scene), "u_knot_count": plan.knots.count,
+                "u_inv_unit": plan.knots.inv_unit}
+    bind(prog, textures, uniforms)
+    rows = plan.knots.texture_rows()
+    capacity = plan.defines["KNOT_CAPACITY"]
+    for name, row in (("u_knot_color", rows[0]), ("u_knot_opacity", rows[1])):
+        padded = np.zeros((capacity, 4), np.float32)
+        padded[:len(row)] = row
+        if name in prog:
+            prog[name].write(padded.tobytes())
+    prog["u_view_proj"].write(projection(scene).astype("f4").tobytes())
+    vao = renderer.resource("tetra_faces", make=lambda: _FaceIndices(ctx), capacity=1).vao(prog, plan.draw.size)
+    ctx.disable(ctx.DEPTH_TEST)
+    ctx.enable(ctx.BLEND | ctx.CULL_FACE)
+    ctx.cull_face = "front"
+    ctx.blend_func = ctx.ONE, ctx.ONE_MINUS_SRC_ALPHA
+    ctx.blend_equation = ctx.FUNC_ADD
+    vao.render(ctx.TRIANGLES, vertices=12 * int(plan.draw.size))
+    ctx.disable(ctx.BLEND | ctx.CULL_FACE)
+    return fbo
+
+
+class _FaceIndices:
+    """The index buffer 4k + LOCAL_FACES for cells k = 0, 1, ...: the four faces of every
+    drawn cell from its four vertices, so each vertex is shaded once (GL reuses a vertex
+    repeated within a draw's index window). Independent of the order; grown as needed."""
+
+    def __init__(self, ctx):
+        self.ctx = ctx
+        self.cells = 0
+        self.ibo = None
+        self.vaos = {}
+
+    def vao(self, prog, cells):
+        if cells > self.cells:
+            self.release()
+            self.cells = max(cells, 2 * self.cells)
+            idx = (4 * np.arange(self.cells, dtype=np.int64)[:, None] + LOCAL_FACES.reshape(1, 12))
+            self.ibo = self.ctx.buffer(idx.astype(np.int32).tobytes())
+        vao = self.vaos.get(prog.glo)
+        if vao is None:
+            vao = self.vaos[prog.glo] = self.ctx.vertex_array(prog, [], index_buffer=self.ibo,
+                                                              index_element_size=4)
+        return vao
+
+    def release(self):
+        for vao in self.vaos.values():
+            vao.release()
+        self.vaos.clear()
+        if self.ibo is not None:
+            self.ibo.release()
+            self.ibo = None

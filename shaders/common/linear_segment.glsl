@@ -1,0 +1,167 @@
+// The emission-absorption integral of a segment along which the field is linear
+// (NumPy twin: reference.linear_segment, whose docstring derives it): cut at the transfer
+// function's knots; per piece the optical depth in closed form and the colour by parts,
+// its one integral by Gauss-Legendre (2 to 8 points); pieces composited front to back.
+#ifndef DVR_LINEAR_SEGMENT_GLSL
+#define DVR_LINEAR_SEGMENT_GLSL
+
+#include "common/compositing.glsl"
+
+#ifndef KNOT_CAPACITY
+#define KNOT_CAPACITY 4
+#endif
+
+// The transfer function's knots as uniforms (cheaper to index than a texture):
+// u_knot_color[k] = (s, r, g, b), u_knot_opacity[k] = (alpha, 1 - alpha, 0, 0)
+uniform vec4 u_knot_color[KNOT_CAPACITY];
+uniform vec4 u_knot_opacity[KNOT_CAPACITY];
+uniform int u_knot_count;    // 2 <= count <= KNOT_CAPACITY
+uniform float u_inv_unit;    // 1 / unit_distance
+
+const int SEG_MAX_PARTS = 16;
+const int SEG_GRADED_PARTS = 24;
+const float SEG_DEEP = 30.0;
+// Gauss-Legendre rules on [0, 1], 2, 3, 4 and 8 points, one after the other
+const float GL_X[17] = float[17](0.21132486540518713, 0.78867513459481287,
+    0.1127016653792583, 0.5, 0.8872983346207417,
+    0.069431844202973714, 0.33000947820757187, 0.66999052179242813, 0.93056815579702623,
+    0.019855071751231912, 0.10166676129318664, 0.2372337950418355, 0.40828267875217511,
+    0.59171732124782483, 0.7627662049581645, 0.89833323870681336, 0.98014492824876809);
+const float GL_W[17] = float[17](0.5, 0.5,
+    0.27777777777777785, 0.44444444444444442, 0.27777777777777785,
+    0.17392742256872679, 0.32607257743127321, 0.32607257743127321, 0.17392742256872679,
+    0.050614268145188532, 0.11119051722668721, 0.15685332293894344, 0.18134189168918083,
+    0.18134189168918083, 0.15685332293894344, 0.11119051722668721, 0.050614268145188532);
+
+float knotValue(int k) { return u_knot_color[k].r; }
+
+// Colour, alpha and transparency at s on the line of interval j (constant beyond the ends).
+void knotLine(int j, float s, out vec3 c, out float a, out float w) {
+    int jj = clamp(j, 0, u_knot_count - 2);
+    vec4 r0 = u_knot_color[jj];
+    vec4 r1 = u_knot_color[jj + 1];
+    vec4 q0 = u_knot_opacity[jj];
+    vec4 q1 = u_knot_opacity[jj + 1];
+    float f = j < 0 ? 0.0 : (j >= u_knot_count - 1 ? 1.0 : clamp((s - r0.r) / (r1.r - r0.r), 0.0, 1.0));
+    c = mix(r0.gba, r1.gba, f);
+    a = mix(q0.r, q1.r, f);
+    w = mix(q0.g, q1.g, f);
+}
+
+// H(x): the mean of ln(1 + x g) over g in [0, 1], x >= -1 (series below |x| = 0.1).
+float meanLog1p(float x) {
+    if (abs(x) < 0.1) {
+        float acc = 0.0;
+        for (int k = 8; k >= 1; k--) acc = x * (1.0 / float(k * (k + 1)) - acc);
+        return acc;
+    }
+    if (x <= -1.0) return -1.0;
+    return (1.0 + x) * log(1.0 + x) / x - 1.0;
+}
+
+// Optical depth from a piece's start to fraction f of it (w = 1 - alpha going linearly
+// from w_a to w_a (1 + r); nlw = -ln w_a; l_over_u = piece length / unit distance).
+float opticalDepthTo(float f, float nlw, float r, float l_over_u) {
+    return l_over_u * f * (nlw - meanLog1p(r * f));
+}
+
+// T(f) - T(1) at fraction f of a piece of optical depth od (0 beyond SEG_DEEP).
+float nodeTerm(float f, float nlw, float r, float lu, float od) {
+    float od_to = opticalDepthTo(f, nlw, r, lu);
+    return od_to < SEG_DEEP ? exp(-od_to) * -expm1Accurate(-max(od - od_to, 0.0)) : 0.0;
+}
+
+// nodeTerm where |r| <= 0.01 and od <= 0.01: the same quantities by short series
+// (each truncation below 1e-12 relative there).
+float thinNodeTerm(float f, float nlw, float r, float lu, float od) {
+    float x = r * f;
+    float h = x * (0.5 - x * (1.0 / 6.0 - x * (1.0 / 12.0 - x * (1.0 / 20.0))));
+    float od_to = lu * f * (nlw - h);
+    float d = max(od - od_to, 0.0);
+    float t = 1.0 - od_to * (1.0 - od_to * (0.5 - od_to * (1.0 / 6.0 - od_to * (1.0 / 24.0))));
+    float e = d * (1.0 - d * (0.5 - d * (1.0 / 6.0 - d * (1.0 / 24.0))));
+    return t * e;
+}
+
+// Count of knots <= s (strict = false) or < s (strict = true): binary search.
+int knotsBelow(float s, bool strict) {
+    int lo = 0, hi = u_knot_count;
+    while (lo < hi) {
+        int mid = (lo + hi) / 2;
+        float k = knotValue(mid);
+        if (strict ? k < s : k <= s) lo = mid + 1; else hi = mid;
+    }
+    return lo;
+}
+
+// Premultiplied (C, A) of a segment len long, the field going linearly from s_front
+// (nearest the eye) to s_back.
+vec4 linearSegment(float s_front, float s_back, float len) {
+    if (len <= 0.0) return vec4(0.0);
+    bool up = s_back >= s_front;
+    int j = up ? knotsBelow(s_front, false) - 1 : knotsBelow(s_front, true) - 1;
+    float ds = abs(s_back - s_front);
+    vec3 color = vec3(0.0);
+    float alpha_acc = 0.0;
+    float a = s_front;
+    for (int piece = 0; piece <= u_knot_count; piece++) {
+        float b;
+        if (up) {
+            b = j + 1 <= u_knot_count - 1 ? min(knotValue(j + 1), s_back) : s_back;
+        } else {
+            b = j >= 0 ? max(knotValue(j), s_back) : s_back;
+        }
+        float l = ds > 0.0 ? len * (abs(b - a) / ds) : len;
+        vec3 ca, cb;
+        float aa, wa, ab, wb;
+        knotLine(j, a, ca, aa, wa);
+        knotLine(j, b, cb, ab, wb);
+        if (wa <= 0.0) {                       // alpha = 1 here: the ray ends
+            compositeFrontToBack(color, alpha_acc, ca, 1.0);
+            break;
+        }
+        if (l > 0.0 && (aa > 0.0 || ab > 0.0)) {
+            float lu = l * u_inv_unit;
+            float nlw = aa <= 0.5 ? -log1pAccurate(-aa) : -log(wa);
+            float r = (wb - wa) / wa;
+            float od = opticalDepthTo(1.0, nlw, r, lu);
+            float A = -expm1Accurate(-od);
+            bool graded = wb <= 0.0;
+            int parts = graded ? SEG_GRADED_PARTS : int(clamp(ceil(od), 1.0, float(SEG_MAX_PARTS)));
+            // points per part: fewer on thin pieces of nearly constant opacity (NumPy: node_count)
+            float ar = abs(r);
+            int first = 9, count = 8;
+            if (!graded && od <= 0.01 && ar <= 0.01) { first = 0; count = 2; }
+            else if (!graded && od <= 0.1 && ar <= 0.1) { first = 2; count = 3; }
+            else if (!graded && od <= 0.3 && ar <= 0.3) { first = 5; count = 4; }
+            float mean = 0.0;
+            if (count == 2) {              // the common thin piece: straight-line code
+                mean = 0.5 * (thinNodeTerm(GL_X[0], nlw, r, lu, od) + thinNodeTerm(GL_X[1], nlw, r, lu, od));
+            } else {
+                for (int p = 0; p < parts; p++) {
+                    float f0 = graded ? 1.0 - exp2(-float(p)) : float(p) / float(parts);
+                    float f1 = graded ? (p == parts - 1 ? 1.0 : 1.0 - exp2(-float(p + 1))) : float(p + 1) / float(parts);
+                    for (int i = first; i < first + count; i++) {
+                        mean += GL_W[i] * (f1 - f0) * nodeTerm(f0 + GL_X[i] * (f1 - f0), nlw, r, lu, od);
+                    }
+                }
+            }
+            vec3 C = ca * A + (cb - ca) * mean;
+            if (graded) {                      // alpha = 1 at the far end: the ray ends there
+                C += exp(-od) * cb;
+                A = 1.0;
+            }
+            // C is already associated: composite it with the piece's opacity
+            float weight = 1.0 - alpha_acc;
+            color += weight * C;
+            alpha_acc += weight * A;
+            if (graded) break;
+        }
+        a = b;
+        if ((up && a >= s_back) || (!up && a <= s_back)) break;
+        j += up ? 1 : -1;
+    }
+    return vec4(color, alpha_acc);
+}
+
+#endif

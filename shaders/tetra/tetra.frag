@@ -1,0 +1,45 @@
+// Projected tetrahedra, per fragment: the pixel's ray clipped against the cell's four
+// planes gives the exact segment through the cell (front and back distance), the cell's
+// linear field gives the scalar at both ends, and the segment is integrated exactly for
+// the piecewise-linear transfer function (common/linear_segment.glsl). GL blends the
+// premultiplied result over what is behind it (cells arrive back to front).
+#version 330 core
+
+#ifndef ORTHO
+#define ORTHO 0
+#endif
+
+#include "common/camera_ray.glsl"
+#include "common/linear_segment.glsl"
+
+flat in mat3x4 v_normals;      // the cell's outward plane normals, by component (tetra.vert)
+flat in vec4 v_room;           // plane offsets from the eye: d - n . eye
+flat in vec4 v_field;          // gradient of the linear field, value at the eye
+
+out vec4 frag_color;
+
+void main() {
+    vec3 origin, dir;
+    pixelRay(origin, dir);
+    vec4 along = v_normals * dir;
+#if ORTHO
+    vec3 offset = origin - u_eye;             // orthographic rays start off the eye
+    vec4 room = v_room - v_normals * offset;
+#else
+    vec3 offset = vec3(0.0);
+    vec4 room = v_room;
+#endif
+    // the ray is in a plane's inner half-space where room >= 0; parallel and outside: none
+    if (any(lessThan(mix(vec4(1.0), room, equal(along, vec4(0.0))), vec4(0.0)))) discard;
+    vec4 t = room / along;
+    vec4 exits = mix(vec4(3.0e38), t, greaterThan(along, vec4(0.0)));
+    vec4 entries = mix(vec4(0.0), t, lessThan(along, vec4(0.0)));
+    float t_in = max(max(entries.x, entries.y), max(entries.z, entries.w));   // >= 0: rays start here
+    float t_out = min(min(exits.x, exits.y), min(exits.z, exits.w));
+    if (t_out <= t_in) discard;
+    float rate = dot(v_field.xyz, dir);
+    float s_at_start = v_field.w + dot(v_field.xyz, offset);
+    float s_front = s_at_start + t_in * rate;
+    float s_back = s_at_start + t_out * rate;
+    frag_color = linearSegment(s_front, s_back, t_out - t_in);
+}
