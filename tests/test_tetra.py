@@ -268,3 +268,21 @@ def test_segment_integral_against_independent_quadrature():
     want = np.array([exact_segment(opaque, *x) for x in zip(a, b, l)])
     assert np.abs(got - want).max() < 1e-12
     assert np.all(got[[0, 1, 2], 3] == 1.0)
+
+
+@pytest.mark.parametrize("mode", ["mip", "minip", "average"])
+def test_reduction_modes_on_a_linear_field(renderer, mode):
+    """A field linear in z seen along z: each pixel's maximum, minimum and mean are known
+    (the value at the top, at the bottom, and halfway), classified by the TF."""
+    mesh = TetMesh(CUBE, SIX, CUBE[:, 2] + 0.2 * CUBE[:, 0])
+    tf = TransferFunction([(0, 1, 0, 0), (1.2, 0, 0, 1)], [(0, 0.1), (1.2, 0.9)], unit_distance=0.5)
+    scene = Scene(mesh, tf, Camera((0.5, 0.5, 3.0), (0.5, 0.5, 0.5), ortho_height=1.6), 16, 16, mode=mode)
+    img = renderer.render(scene, technique="tetra")
+    o, _ = scene.camera.rays(16, 16)
+    x, y = o[..., 0], o[..., 1]
+    inside = (x >= 0) & (x <= 1) & (y >= 0) & (y <= 1)
+    s = 0.2 * x + {"mip": 1.0, "minip": 0.0, "average": 0.5}[mode]
+    a = np.where(inside, tf.opacity(s), 0.0)
+    want = np.concatenate([tf.color(s) * a[..., None], a[..., None]], axis=-1)
+    assert np.abs(img - want).max() < 1e-6
+    assert tetra.make_plan(scene).draw.size == mesh.n_tets     # nothing is culled or sorted

@@ -53,6 +53,8 @@ def render_plan(plan, lut_exact=False):
     if plan.draw.size == 0:
         return out.reshape(H, W, 4)
     seg = covered_once(ray_tet_segments(scene, tets=plan.draw))
+    if scene.mode != "composite":
+        return _reduce(scene, seg, out).reshape(H, W, 4)
     rank = np.full(len(scene.volume.tets), -1, np.int64)
     rank[plan.draw] = np.arange(plan.draw.size)
     r = rank[seg["tet"]]
@@ -70,3 +72,27 @@ def render_plan(plan, lut_exact=False):
         p = pix[at]
         out[p] = blend_over(out[p], rgba[at], plan.target)
     return out.reshape(H, W, 4)
+
+
+def _reduce(scene, seg, out):
+    """mip, minip, average: the field's extreme or mean over each pixel's segments,
+    classified with the TF (float64)."""
+    pix = seg["pixel"]
+    n = len(out)
+    if scene.mode == "average":
+        length = seg["t1"] - seg["t0"]
+        total = np.bincount(pix, length, n)
+        integral = np.bincount(pix, 0.5 * (seg["s0"] + seg["s1"]) * length, n)
+        hit = total > 0
+        s = np.where(hit, integral / np.where(hit, total, 1.0), 0.0)
+    else:
+        sign = 1.0 if scene.mode == "mip" else -1.0
+        v = sign * np.maximum(sign * seg["s0"], sign * seg["s1"])
+        best = np.full(n, -np.inf)
+        np.maximum.at(best, pix, sign * v)
+        hit = np.isfinite(best)
+        s = np.where(hit, sign * best, 0.0)
+    a = scene.tf.opacity(s[hit])
+    out[hit, :3] = scene.tf.color(s[hit]) * a[:, None]
+    out[hit, 3] = a
+    return out

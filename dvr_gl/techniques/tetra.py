@@ -42,12 +42,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..cache import TableCache
-from ..mesh import LOCAL_FACES, centroid_order, mpvo_order, topology, visible_cells
+from ..mesh import LOCAL_FACES, Order, centroid_order, mpvo_order, topology, visible_cells
 from ..reference.linear_segment import SegmentKnots
 from ..scene import Scene
 from .common import TARGETS, bind, camera_uniforms, check_scene, check_target, eye_view_projection
 
-MODES = ("composite",)
+MODES = ("composite", "mip", "minip", "average")
 TAKES_STEP = False
 DATA = "mesh"
 SORTS = ("mpvo", "centroid")
@@ -80,6 +80,16 @@ def make_plan(scene, step=None, *, sort="mpvo", target="rgba32f", tables=None):
     check_target(target)
     mesh, tf = scene.volume, scene.tf
     knots = tables.get("segment_knots", tf, make=SegmentKnots)
+    if scene.mode != "composite":
+        # order-independent reductions of the field (not of the TF): every cell with a
+        # volume counts, and nothing is sorted
+        cells = np.flatnonzero(~topology(mesh).flat).astype(np.int32)
+        defines = {"KNOT_CAPACITY": knot_capacity(knots.count), f"MODE_{scene.mode.upper()}": 1,
+                   "MODE_COMPOSITE": 0}
+        if scene.camera.is_ortho:
+            defines["ORTHO"] = 1
+        return TetraPlan(scene=scene, knots=knots, visible=cells, order=Order(cells, 0, 0), draw=cells,
+                         sort=sort, target=target, defines=defines)
     visible = tables.get("visible_cells", mesh, tf, make=visible_cells)
     timing = {}
 
@@ -208,16 +218,33 @@ def projection(scene):
     return eye_view_projection(scene, near, far)
 
 
+def _knot_uniforms(prog, plan):
+    rows = plan.knots.texture_rows()
+    capacity = plan.defines["KNOT_CAPACITY"]
+    for name, row in (("u_knot_color", rows[0]), ("u_knot_opacity", rows[1])):
+        padded = np.zeros((capacity, 4), np.float32)
+        padded[:len(row)] = row
+        if name in prog:
+            prog[name].write(padded.tobytes())
+
+
 def draw(renderer, plan):
     """Render the plan into the renderer's target; returns that framebuffer."""
     ctx = renderer.ctx
     scene = plan.scene
     mesh = scene.volume
+    composite = scene.mode == "composite"
     fbo = renderer.target(scene.width, scene.height, TARGETS[plan.target])
     fbo.use()
     fbo.clear(0.0, 0.0, 0.0, 0.0)
     if plan.draw.size == 0:
         return fbo
+    if not composite:
+        # the reduction needs float precision whatever the output target is
+        reduced = renderer.resource("tetra_reduced", make=lambda: _Reduced(ctx), capacity=1).get(
+            scene.width, scene.height)
+        reduced.use()
+        reduced.clear(-3.0e38 if scene.mode != "average" else 0.0, 0.0, 0.0, 0.0)
     prog = renderer.programs.get("tetra/tetra.vert", "tetra/tetra.frag", plan.defines)
     data = renderer.resource("tetra_mesh", mesh, make=lambda: MeshTextures(ctx, mesh), capacity=1)
     order = renderer.resource("tetra_order", make=_OrderTexture, capacity=1).write(ctx, plan.draw)
@@ -226,23 +253,53 @@ def draw(renderer, plan):
     uniforms = {**camera_uniforms(scene), "u_knot_count": plan.knots.count,
                 "u_inv_unit": plan.knots.inv_unit}
     bind(prog, textures, uniforms)
-    rows = plan.knots.texture_rows()
-    capacity = plan.defines["KNOT_CAPACITY"]
-    for name, row in (("u_knot_color", rows[0]), ("u_knot_opacity", rows[1])):
-        padded = np.zeros((capacity, 4), np.float32)
-        padded[:len(row)] = row
-        if name in prog:
-            prog[name].write(padded.tobytes())
+    _knot_uniforms(prog, plan)
     prog["u_view_proj"].write(projection(scene).astype("f4").tobytes())
     vao = renderer.resource("tetra_faces", make=lambda: _FaceIndices(ctx), capacity=1).vao(prog, plan.draw.size)
     ctx.disable(ctx.DEPTH_TEST)
     ctx.enable(ctx.BLEND | ctx.CULL_FACE)
     ctx.cull_face = "front"
-    ctx.blend_func = ctx.ONE, ctx.ONE_MINUS_SRC_ALPHA
-    ctx.blend_equation = ctx.FUNC_ADD
+    if composite:
+        ctx.blend_func = ctx.ONE, ctx.ONE_MINUS_SRC_ALPHA
+        ctx.blend_equation = ctx.FUNC_ADD
+    else:
+        ctx.blend_func = ctx.ONE, ctx.ONE
+        ctx.blend_equation = ctx.FUNC_ADD if scene.mode == "average" else ctx.MAX
     vao.render(ctx.TRIANGLES, vertices=12 * int(plan.draw.size))
     ctx.disable(ctx.BLEND | ctx.CULL_FACE)
+    ctx.blend_equation = ctx.FUNC_ADD
+    if not composite:
+        classify = renderer.programs.get("tetra/fullscreen.vert", "tetra/tetra_classify.frag",
+                                         {k: v for k, v in plan.defines.items()
+                                          if k in ("KNOT_CAPACITY", "MODE_MINIP", "MODE_AVERAGE")})
+        fbo.use()
+        bind(classify, {"t_reduced": reduced.color_attachments[0]}, {"u_knot_count": plan.knots.count})
+        _knot_uniforms(classify, plan)
+        renderer.empty_vao(classify).render(ctx.TRIANGLES, vertices=3)
     return fbo
+
+
+class _Reduced:
+    """An RGBA32F framebuffer for the reductions (mip, minip, average), kept per size."""
+
+    def __init__(self, ctx):
+        self.ctx = ctx
+        self.size = None
+        self.fbo = None
+
+    def get(self, width, height):
+        if self.size != (width, height):
+            self.release()
+            self.fbo = self.ctx.framebuffer([self.ctx.texture((width, height), 4, dtype="f4")])
+            self.size = (width, height)
+        return self.fbo
+
+    def release(self):
+        if self.fbo is not None:
+            for tex in self.fbo.color_attachments:
+                tex.release()
+            self.fbo.release()
+            self.fbo = None
 
 
 class _FaceIndices:

@@ -3,10 +3,25 @@
 // linear field gives the scalar at both ends, and the segment is integrated exactly for
 // the piecewise-linear transfer function (common/linear_segment.glsl). GL blends the
 // premultiplied result over what is behind it (cells arrive back to front).
+// mip / minip / average: the fragment writes what GL's blending reduces in any order
+// (the larger or smaller end value, or the segment's integral and length), and
+// tetra_classify.frag classifies the result.
 #version 330 core
 
 #ifndef ORTHO
 #define ORTHO 0
+#endif
+#ifndef MODE_COMPOSITE
+#define MODE_COMPOSITE 1
+#endif
+#ifndef MODE_MIP
+#define MODE_MIP 0
+#endif
+#ifndef MODE_MINIP
+#define MODE_MINIP 0
+#endif
+#ifndef MODE_AVERAGE
+#define MODE_AVERAGE 0
 #endif
 
 #include "common/camera_ray.glsl"
@@ -41,5 +56,14 @@ void main() {
     float s_at_start = v_field.w + dot(v_field.xyz, offset);
     float s_front = s_at_start + t_in * rate;
     float s_back = s_at_start + t_out * rate;
+#if MODE_MIP
+    frag_color = vec4(max(s_front, s_back), 0.0, 0.0, 1.0);           // blended with MAX
+#elif MODE_MINIP
+    frag_color = vec4(-min(s_front, s_back), 0.0, 0.0, 1.0);          // MAX of the negation
+#elif MODE_AVERAGE
+    float len = t_out - t_in;
+    frag_color = vec4(0.5 * (s_front + s_back) * len, len, 0.0, 1.0);  // blended by addition
+#else
     frag_color = linearSegment(s_front, s_back, t_out - t_in);
+#endif
 }
