@@ -58,6 +58,7 @@ class Topology:
     cell_min: np.ndarray      # (M,) smallest and largest vertex scalar
     cell_max: np.ndarray
     convex: bool              # the whole mesh fills its convex hull (MPVO alone is exact)
+    on_hull: np.ndarray       # (F,) bool: boundary faces in a supporting plane of all points
 
     def cell_planes(self):
         """(M, 4, 4) float64: per cell and local face, (outward unit normal, offset)."""
@@ -123,21 +124,33 @@ def _build_topology(mesh):
     offsets = np.einsum("ij,ij->i", normal, tri.mean(axis=1))
     sign = np.where(cell_of.reshape(M, 4) == face_cells[tet_faces, 0], 1.0, -1.0)
     s = mesh.scalars[tets]
-    convex = _fills_convex_hull(mesh, np.abs(vol6).sum() / 6.0)
+    convex, hull_points = _convex_hull(pts, np.abs(vol6).sum() / 6.0)
+    on_hull = np.zeros(F, bool)
+    boundary = np.flatnonzero(face_cells[:, 1] < 0)
+    if hull_points is not None and boundary.size:
+        eps = 1e-9 * float(np.linalg.norm(pts.max(axis=0)))
+        n_b, d_b = normal[boundary], offsets[boundary]
+        beyond = np.zeros(boundary.size)
+        for start in range(0, len(hull_points), 256):
+            chunk = hull_points[start:start + 256]
+            beyond = np.maximum(beyond, (n_b @ chunk.T - d_b[:, None]).max(axis=1))
+        on_hull[boundary] = beyond <= eps
     return Topology(tets=tets, flat=flat, faces=faces, face_cells=face_cells, tet_faces=tet_faces,
                     tet_face_sign=sign, normals=normal, offsets=offsets, centroids=p.mean(axis=1),
-                    cell_min=s.min(axis=1), cell_max=s.max(axis=1), convex=convex)
+                    cell_min=s.min(axis=1), cell_max=s.max(axis=1), convex=convex, on_hull=on_hull)
 
 
-def _fills_convex_hull(mesh, volume):
-    """True when the cells' volume equals the convex hull's (to rounding): the domain is
-    convex, and MPVO over face neighbours alone is a visibility order."""
+def _convex_hull(points, volume):
+    """(the cells fill the convex hull, the hull's vertices): a convex domain needs no
+    order across gaps, and a boundary face in a supporting plane of the hull can never
+    be part of a gap (nothing lies beyond it)."""
     from scipy.spatial import ConvexHull
     try:
-        hull = ConvexHull(mesh.points)
+        hull = ConvexHull(points)
     except Exception:          # flat point sets: nothing to order across gaps
-        return True
-    return abs(hull.volume - volume) <= 1e-9 * max(hull.volume, 1e-300)
+        return True, None
+    convex = abs(hull.volume - volume) <= 1e-9 * max(hull.volume, 1e-300)
+    return convex, points[hull.vertices]
 
 
 # ------------------------------------------------------------------------- visibility
@@ -271,6 +284,11 @@ def _gap_constraints(mesh, topo, member, scene):
     in0 = member[fc[:, 0]]
     in1 = (fc[:, 1] >= 0) & member[np.maximum(fc[:, 1], 0)]
     boundary = np.flatnonzero(in0 != in1)
+    if boundary.size == 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    # a face on the convex hull has nothing beyond it: no ray leaves the domain there and
+    # re-enters, nor enters there after leaving (module docstring)
+    boundary = boundary[~topo.on_hull[boundary]]
     if boundary.size == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.int64)
     cell = np.where(in0[boundary], fc[boundary, 0], fc[boundary, 1])
