@@ -4,11 +4,15 @@ Exit codes: 0 success; 1 the work failed (no GL backend, a failed frame); 2 bad 
 (a message on stderr names the option and the value; no traceback, no output file);
 130 interrupted. Set ``DVR_GL_DEBUG=1`` to get tracebacks instead of one-line messages.
 
-``render`` takes a volume file (see :func:`dvr_gl.io.load_volume`) or a bundled data
-set, ``builtin:ct_head`` or ``builtin:synthetic``, e.g.::
+``render`` takes a volume file (see :func:`dvr_gl.io.load_volume`), a tetrahedral (or
+hexahedral, ...) mesh file (see :func:`dvr_gl.io.load_mesh`; rendered by ``tetra``) or a
+bundled data set, ``builtin:ct_head`` or ``builtin:synthetic``, e.g.::
 
     dvr-gl render builtin:ct_head --elevation 90 --size 512x512 --out head.png
     dvr-gl render scan.raw --shape 93,64,64 --dtype int16 --spacing 3.2,3.2,1.5 --out scan.png
+    dvr-gl render bluntfin_tets.vtu --scalars Pressure --sort centroid --out fin.png
+
+``info FILE`` describes a volume or mesh file instead of the GL backends.
 """
 
 from __future__ import annotations
@@ -23,6 +27,8 @@ import time
 
 from . import io as dvr_io
 from .scene import MODES
+
+SORTS = ("mpvo", "centroid")  # dvr_gl.techniques.tetra's orders (imported lazily there)
 
 PROG = "dvr-gl"
 
@@ -41,7 +47,8 @@ BUILTINS = {
 
 # Which command-line option an InputError's field stands for.
 _OPTION_OF_FIELD = {"path": "INPUT", "shape": "--shape", "dtype": "--dtype", "spacing": "--spacing",
-                    "origin": "--origin", "size": "--size", "background": "--background"}
+                    "origin": "--origin", "size": "--size", "background": "--background",
+                    "scalars": "--scalars"}
 
 
 def _transfer():
@@ -125,16 +132,22 @@ _background = _arg_type(_background_value, "background")
 def add_render_options(r):
     """The options shared by ``render`` and ``view``: the input, its geometry, the transfer
     function, the technique and its options, the mode, the camera and the image size."""
-    r.add_argument("input", metavar="INPUT", help="volume file or builtin:NAME")
+    r.add_argument("input", metavar="INPUT", help="volume file, mesh file (.vtu, .vtk, .npz with points "
+                                                  "and tets, ...) or builtin:NAME")
     r.add_argument("--tf", metavar="PRESET|FILE.json",
                    help=f"transfer function: a preset ({', '.join(PRESETS)}) or a JSON file "
                         "{\"color\": [[s, r, g, b], ...], \"opacity\": [[s, a], ...], \"unit_distance\": u}; "
                         "default: auto (the data set's own for builtin inputs)")
-    r.add_argument("--technique", default="raycast",
-                   help="rendering technique: raycast, slice2d or slice3d (default: raycast)")
+    r.add_argument("--technique", default=None,
+                   help="rendering technique: raycast, slice2d or slice3d for volumes, tetra for meshes "
+                        "(default: raycast, or tetra for a mesh)")
+    r.add_argument("--scalars", metavar="NAME",
+                   help="mesh inputs: the point array to render (default: the first scalar array)")
+    r.add_argument("--sort", choices=SORTS,
+                   help="tetra: cell order, exact per pixel (mpvo) or by centroid distance (default: mpvo)")
     r.add_argument("--step", type=_positive, metavar="S",
                    help="sampling step (slice distance for slice3d) in world units (default: half "
-                        "the smallest spacing; slice2d takes none, see --interpolate)")
+                        "the smallest spacing; slice2d takes none, see --interpolate; tetra none)")
     r.add_argument("--preintegrate", action="store_true",
                    help="pre-integrated classification of whole segments (composite mode)")
     r.add_argument("--interpolate", type=_count, metavar="K",
@@ -174,14 +187,39 @@ def add_render_options(r):
 
 
 # which technique takes which option
-TECHNIQUE_OPTIONS = {"interpolate": ("slice2d",), "proxy": ("slice3d",), "shells": ("slice3d",)}
+TECHNIQUE_OPTIONS = {"interpolate": ("slice2d",), "proxy": ("slice3d",), "shells": ("slice3d",),
+                     "preintegrate": ("raycast", "slice2d", "slice3d"), "sort": ("tetra",)}
+
+#: the techniques that render meshes (cell projection); the others render grid volumes
+MESH_TECHNIQUES = ("tetra",)
+GRID_TECHNIQUES = ("raycast", "slice2d", "slice3d")
+
+# volume-only options (raw geometry and masking): given with a mesh INPUT, a usage error
+_VOLUME_OPTIONS = (("spacing", "--spacing"), ("origin", "--origin"), ("mask_nonfinite", "--mask-nonfinite"))
+
+
+def input_is_mesh(args):
+    """Whether INPUT is a mesh (rendered by cell projection) rather than a grid volume.
+    Raw geometry (--shape, --dtype) makes it a volume, whatever its extension."""
+    name = getattr(args, "input", None)
+    if not name or name.startswith("builtin:"):
+        return False
+    if getattr(args, "shape", None) is not None or getattr(args, "dtype", None) is not None:
+        return False
+    return dvr_io.is_mesh_file(name)
 
 
 def technique_options(args):
     """The keyword arguments for ``Renderer.render`` from parsed render options; an option
-    the chosen technique does not take is a usage error naming it."""
+    the chosen technique does not take is a usage error naming it, and so is a technique
+    for the other kind of input (a grid technique on a mesh, tetra on a volume). Without
+    --technique, ``args.technique`` is set to tetra for a mesh INPUT, raycast otherwise."""
+    mesh = input_is_mesh(args)
+    if args.technique is None:
+        args.technique = MESH_TECHNIQUES[0] if mesh else "raycast"
+    _check_input_kind(args, mesh)
     kwargs = {"technique": args.technique}
-    for name in ("step", "preintegrate", "interpolate", "proxy", "shells", "target"):
+    for name in ("step", "preintegrate", "interpolate", "proxy", "shells", "sort", "target"):
         value = getattr(args, name, None)
         if value is None or value is False:
             continue
@@ -192,8 +230,28 @@ def technique_options(args):
         if name == "step" and args.technique == "slice2d":
             raise UsageError("--step", "slice2d's slice distance is fixed by the data "
                                        "(spacing / (interpolate + 1)); use --interpolate K")
+        if name == "step" and args.technique in MESH_TECHNIQUES:
+            raise UsageError("--step", f"{args.technique} integrates each cell exactly and takes no step")
         kwargs[name] = value
     return kwargs
+
+
+def _check_input_kind(args, mesh):
+    """Technique and input options against the kind of INPUT (mesh or grid volume)."""
+    technique = args.technique
+    if mesh and technique in GRID_TECHNIQUES:
+        raise UsageError("--technique", f"{technique} renders grid volumes, but {args.input} is a mesh; "
+                                        f"use --technique {' or '.join(MESH_TECHNIQUES)}")
+    if not mesh and technique in MESH_TECHNIQUES:
+        raise UsageError("--technique", f"{technique} renders tetrahedral meshes, but {args.input} is a "
+                                        f"grid volume; use --technique {', '.join(GRID_TECHNIQUES[:-1])} or {GRID_TECHNIQUES[-1]}")
+    if not mesh and getattr(args, "scalars", None) is not None:
+        raise UsageError("--scalars", f"chooses a mesh's point array; {args.input} is a grid volume")
+    if mesh:
+        for attr, option in _VOLUME_OPTIONS:
+            value = getattr(args, attr, None)
+            if value is not None and value is not False:
+                raise UsageError(option, f"is for grid volumes, not the mesh {args.input}")
 
 
 def build_parser(bench_module=None):
@@ -206,14 +264,26 @@ def build_parser(bench_module=None):
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
 
-    sub.add_parser("info", help="list the GL backends, their renderer, version and limits",
-                   description="Try each headless GL backend and print what it offers.")
+    i = sub.add_parser("info", help="list the GL backends (or describe a volume or mesh FILE)",
+                       description="Try each headless GL backend and print what it offers; with FILE, "
+                                   "describe that volume or mesh instead (no GL needed).")
+    i.add_argument("file", nargs="?", metavar="FILE",
+                   help="a volume file, mesh file or builtin:NAME to describe")
+    i.add_argument("--scalars", metavar="NAME", help="mesh FILE: the point array whose range to print")
+    info_raw = i.add_argument_group("raw files")
+    info_raw.add_argument("--shape", type=_shape, metavar="NZ,NY,NX", help="sample counts of a raw file")
+    info_raw.add_argument("--dtype", metavar="D", help="sample type of a raw file")
+    info_raw.add_argument("--spacing", type=_spacing, metavar="SX,SY,SZ", help="sample spacing")
+    info_raw.add_argument("--origin", type=_origin, metavar="OX,OY,OZ", help="world position of the first sample")
+    info_raw.add_argument("--mask-nonfinite", action="store_true", help="allow NaN and inf samples")
 
     r = sub.add_parser(
         "render", help="render a volume to a PNG",
         description="Render a volume to a PNG. INPUT is a volume file (.npy, .npz, .nrrd, .nhdr, "
                     ".mhd, .mha; any other name is raw samples and needs --shape, --dtype and "
-                    "--spacing) or a bundled data set: builtin:ct_head, builtin:synthetic.")
+                    "--spacing), a mesh file (.vtu, .vtk unstructured grid, .npz with points and "
+                    "tets, or any other format meshio reads; rendered with --technique tetra) or a "
+                    "bundled data set: builtin:ct_head, builtin:synthetic.")
     r.add_argument("--out", "-o", required=True, metavar="IMAGE.png", help="the PNG to write")
     add_render_options(r)
 
@@ -239,6 +309,8 @@ def build_parser(bench_module=None):
 
 def cmd_info(args, out=None):
     out = out or sys.stdout
+    if getattr(args, "file", None) is not None:
+        return cmd_info_file(args, out)
     import numpy
     from . import __version__
     try:
@@ -284,6 +356,65 @@ def cmd_info(args, out=None):
     return 0 if working else 1
 
 
+def cmd_info_file(args, out=None):
+    """``info FILE``: what a volume or mesh file holds (no GL)."""
+    out = out or sys.stdout
+    args.input = args.file
+    if args.dtype is not None:
+        try:
+            dvr_io._parse_dtype(args.dtype)
+        except dvr_io.InputError as e:
+            raise UsageError("--dtype", e.detail) from None
+    mesh = input_is_mesh(args)
+    if not mesh and args.scalars is not None:
+        raise UsageError("--scalars", f"chooses a mesh's point array; {args.input} is a grid volume")
+    if mesh:
+        for attr, option in _VOLUME_OPTIONS:
+            value = getattr(args, attr, None)
+            if value is not None and value is not False:
+                raise UsageError(option, f"is for grid volumes, not the mesh {args.input}")
+    data, _ = _load_input(args)
+    if mesh:
+        arrays = dvr_io.point_arrays(args.input)
+        chosen = _scalars_name(args, arrays)
+        lo, hi = data.bounds
+        listed = ", ".join(name + (f" ({k} components)" if k != 1 else "") + (" *" if name == chosen else "")
+                           for name, k in arrays.items())
+        print(f"mesh       {args.input}", file=out)
+        print(f"points     {data.n_points}", file=out)
+        print(f"tets       {data.n_tets} ({zero_volume_count(data)} of zero volume)", file=out)
+        print("bounds     " + ", ".join(f"{axis} {a:g}..{b:g}" for axis, a, b in zip("xyz", lo, hi)), file=out)
+        print(f"arrays     {listed} (* rendered)", file=out)
+        print(f"range      {data.data_range[0]:g}..{data.data_range[1]:g} ({chosen})", file=out)
+    else:
+        nz, ny, nx = data.shape
+        lo, hi = data.bounds
+        print(f"volume     {args.input}", file=out)
+        print(f"shape      {nx}x{ny}x{nz} (x, y, z)", file=out)
+        print(f"dtype      {data.data.dtype}", file=out)
+        print("spacing    " + ",".join(f"{v:g}" for v in data.spacing), file=out)
+        print("bounds     " + ", ".join(f"{axis} {a:g}..{b:g}" for axis, a, b in zip("xyz", lo, hi)), file=out)
+        print(f"range      {data.data_range[0]:g}..{data.data_range[1]:g}"
+              + (" (non-finite samples masked)" if data.has_nonfinite else ""), file=out)
+    return 0
+
+
+def zero_volume_count(mesh):
+    """How many tetrahedra are flat (|6 V| at most 1e-12 times the cube of the longest
+    edge, the test ``dvr_gl.mesh`` applies): they are kept but draw nothing."""
+    p = mesh.points[mesh.tets]
+    edges = p[:, [1, 2, 3, 2, 3, 3]] - p[:, [0, 0, 0, 1, 1, 2]]
+    longest = (edges ** 2).sum(-1).max(axis=1) ** 0.5
+    return int((abs(6 * mesh.signed_volumes()) <= 1e-12 * longest ** 3).sum())
+
+
+def _scalars_name(args, arrays):
+    """The name of the point array a mesh INPUT is rendered with."""
+    if getattr(args, "scalars", None) is not None:
+        return args.scalars
+    return next((name for name, k in arrays.items() if k == 1), "?")
+
+
 def _reason(exc):
     """``Type: message``, continuation lines indented under the backend's line."""
     text = str(exc).strip().replace("\n", "\n  ")
@@ -291,7 +422,9 @@ def _reason(exc):
 
 
 def _load_input(args):
-    """The volume and the default preset name."""
+    """The volume (or mesh) and the default preset name."""
+    if input_is_mesh(args):
+        return dvr_io.load_mesh(args.input, scalars=getattr(args, "scalars", None)), "auto"
     if args.input.startswith("builtin:"):
         name = args.input[len("builtin:"):].replace("-", "_")
         if name not in BUILTINS:
@@ -343,6 +476,8 @@ def _check_out(path):
 
 
 def _check_technique(name):
+    if name is None:  # the default for the input's kind: technique_options picks it
+        return
     try:
         from .techniques import names
     except ImportError:  # no registry: the renderer will judge
@@ -393,17 +528,25 @@ def cmd_render(args, out=None):
         backend = _backend_name(renderer, args.backend)
     dvr_io.save_png(args.out, image, background=args.background)
 
-    nz, ny, nx = volume.shape
-    sx, sy, sz = (float(v) for v in volume.spacing)
     lo, hi = volume.data_range
     view = f"azimuth {args.azimuth:g}, elevation {args.elevation:g}, zoom {args.zoom:g}"
     view += ", orthographic" if args.ortho else f", fov {args.fov:g}"
-    step = f"step {args.step:g}" if args.step is not None else "default step"
+    if args.technique in MESH_TECHNIQUES:
+        step = f"sort {render_kwargs.get('sort', 'mpvo')}"
+    else:
+        step = f"step {args.step:g}" if args.step is not None else "default step"
     extras = [f"{k} {v}" if not isinstance(v, bool) else k for k, v in render_kwargs.items()
-              if k not in ("technique", "step")]
+              if k not in ("technique", "step", "sort")]
     step += "".join(", " + e for e in extras)
-    print(f"volume     {args.input}: {nx}x{ny}x{nz} (x, y, z) {volume.data.dtype}, spacing {sx:g},{sy:g},{sz:g}, "
-          f"values {lo:g}..{hi:g}", file=out)
+    if scene.is_mesh:
+        name = _scalars_name(args, dvr_io.point_arrays(args.input))
+        print(f"mesh       {args.input}: {volume.n_points} points, {volume.n_tets} tets, "
+              f"scalars {name} {lo:g}..{hi:g}", file=out)
+    else:
+        nz, ny, nx = volume.shape
+        sx, sy, sz = (float(v) for v in volume.spacing)
+        print(f"volume     {args.input}: {nx}x{ny}x{nz} (x, y, z) {volume.data.dtype}, spacing {sx:g},{sy:g},{sz:g}, "
+              f"values {lo:g}..{hi:g}", file=out)
     print(f"transfer   {_describe_tf(tf_name, tf)}", file=out)
     print(f"rendered   {args.technique}, mode {mode}" + (f" {args.iso:g}" if mode == "isosurface" else "")
           + f", {step}, {width}x{height}, {view}, backend {backend}", file=out)
@@ -488,6 +631,8 @@ def main(argv=None) -> int:
     command = args.command
     try:
         if command == "info":
+            if args.file is not None:
+                return _guarded("info", cmd_info_file, args, debug)
             return cmd_info(args)
         if command == "demo":
             return cmd_demo(args)
@@ -503,26 +648,31 @@ def main(argv=None) -> int:
 
 def _run_render(args, debug):
     """``render`` with its errors turned into one-line messages and exit codes."""
+    return _guarded("render", cmd_render, args, debug)
+
+
+def _guarded(command, func, args, debug):
+    """``func(args)`` with its errors turned into one-line messages and exit codes."""
     try:
-        return cmd_render(args)
+        return func(args)
     except UsageError as e:
         if debug:
             raise
-        return _fail("render", str(e), 2)
+        return _fail(command, str(e), 2)
     except dvr_io.InputError as e:
         if debug:
             raise
         option = _OPTION_OF_FIELD.get(e.field)
-        return _fail("render", f"{option}: {e.detail}" if option else f"INPUT: {e}", 2)
+        return _fail(command, f"{option}: {e.detail}" if option else f"INPUT: {e}", 2)
     except (ValueError, TypeError, NotImplementedError) as e:
         # The scene and the renderer validate their input and name the parameter.
         if debug:
             raise
-        return _fail("render", str(e).replace("pass mask_nonfinite=True", "pass --mask-nonfinite"), 2)
+        return _fail(command, str(e).replace("pass mask_nonfinite=True", "pass --mask-nonfinite"), 2)
     except (RuntimeError, OSError) as e:  # no GL context, a failed frame, a full disk
         if debug:
             raise
-        return _fail("render", f"{type(e).__name__}: {e}", 1)
+        return _fail(command, f"{type(e).__name__}: {e}", 1)
 
 
 def _fail(command, message, code):

@@ -27,12 +27,29 @@ wrong (``path``, ``shape``, ``dtype``, ``spacing``, a header field, ...) and who
 shows the offending value; a missing file raises :class:`MissingFileError`, which is also
 a ``FileNotFoundError``.
 
+:func:`load_mesh` reads an unstructured mesh into a :class:`dvr_gl.TetMesh`
+(conventions section 2):
+
+- ``.npz`` with arrays ``points`` (N, 3) and ``tets`` (M, 4) -- the layout of the shared
+  mesh data sets -- and one (N,) array per point scalar (others, such as an (N, 3)
+  vector, may be there too).
+- ``.vtu``, legacy ``.vtk`` (``DATASET UNSTRUCTURED_GRID``) and every other format meshio
+  reads (``.msh``, ``.xdmf``, ``.inp``, ``.mesh``, ``.vol``, ...). Tetrahedra are kept;
+  hexahedra, wedges and pyramids are split into tetrahedra conformingly
+  (:mod:`dvr_gl.cell_split`); vertices, lines and surface cells are ignored when the
+  file has 3-D cells; any other 3-D cell (quadratic, polyhedral) is an error naming it.
+
+The field is a point array chosen by name (``scalars``; default: the first array with
+one component). Points no cell uses are kept. :func:`is_mesh_file` says whether a path
+is a mesh rather than a volume; :func:`point_arrays` lists a mesh file's point arrays.
+
 :func:`save_png` writes a premultiplied float RGBA image (conventions section 7)
 atomically; :func:`parse_size` and :func:`parse_triplet` parse command-line values.
 """
 
 from __future__ import annotations
 
+import contextlib
 import gzip
 import math
 import io
@@ -44,10 +61,10 @@ import zlib
 
 import numpy as np
 
-from .scene import MAX_IMAGE_SIDE, Volume
+from .scene import MAX_IMAGE_SIDE, TetMesh, Volume
 
-__all__ = ["InputError", "MissingFileError", "load_volume", "save_png", "to_png_array",
-           "parse_size", "parse_triplet", "RAW_DTYPES"]
+__all__ = ["InputError", "MissingFileError", "load_volume", "load_mesh", "is_mesh_file", "point_arrays",
+           "save_png", "to_png_array", "parse_size", "parse_triplet", "RAW_DTYPES"]
 
 #: dtypes accepted for raw files (any byte order); the Volume holds uint8, uint16, int16,
 #: float32 and float64, the others are widened as the module docstring says.
@@ -582,6 +599,226 @@ def _float_list(text):
         return [float(v) for v in text.split()]
     except ValueError:
         return None
+
+
+# ----------------------------------------------------------------------------- meshes
+
+#: meshio's extensions that are also common names for raw volumes: a mesh only when the
+#: command line gives no raw geometry (see dvr_gl.cli).
+AMBIGUOUS_MESH_EXTENSIONS = (".dat", ".vol")
+
+_SPLIT_CELLS = ("tetra", "pyramid", "wedge", "hexahedron")
+_LOW_DIMENSIONAL_PREFIXES = ("vertex", "line", "triangle", "quad", "polygon")
+
+
+def _mesh_path(path):
+    try:
+        path = os.fspath(path)
+    except TypeError:
+        raise InputError("path", f"expected a file name, got {path!r}") from None
+    if not os.path.exists(path):
+        raise MissingFileError("path", f"no such file {path!r}")
+    if os.path.isdir(path):
+        raise InputError("path", f"{path!r} is a directory, not a mesh file")
+    return path
+
+
+def _meshio_extensions():
+    try:
+        import meshio
+    except ImportError:
+        return ()
+    return tuple(sorted(getattr(meshio, "extension_to_filetypes", {}), key=len, reverse=True))
+
+
+def _vtk_dataset(path):
+    """The DATASET keyword of a legacy .vtk file (its header is ASCII even when the data
+    is binary), or None."""
+    try:
+        with open(path, "rb") as f:
+            for _ in range(12):
+                line = f.readline(1024)
+                if not line:
+                    break
+                words = line.decode("latin-1").split()
+                if len(words) >= 2 and words[0].upper() == "DATASET":
+                    return words[1].upper()
+    except OSError:
+        return None
+    return None
+
+
+def _npz_keys(path):
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            return list(npz.files)
+    except (ValueError, OSError, zlib.error):
+        return []
+
+
+def is_mesh_file(path) -> bool:
+    """Whether ``path`` names an unstructured mesh (for :func:`load_mesh`) rather than a
+    volume (for :func:`load_volume`): ``.vtu``; ``.vtk`` whose DATASET is
+    UNSTRUCTURED_GRID; ``.npz`` holding ``points`` and ``tets``; any other extension
+    meshio reads (``.dat`` and ``.vol`` included, see ``AMBIGUOUS_MESH_EXTENSIONS``)."""
+    path = os.fspath(path)
+    lower = path.lower()
+    if lower.endswith(".vtu"):
+        return True
+    if lower.endswith(".vtk"):
+        return _vtk_dataset(path) == "UNSTRUCTURED_GRID"
+    if lower.endswith(".npz"):
+        return os.path.isfile(path) and {"points", "tets"} <= set(_npz_keys(path))
+    if lower.endswith((".npy", ".nrrd", ".nhdr", ".mhd", ".mha", ".raw", ".raw.gz")):
+        return False
+    return any(lower.endswith(ext) for ext in _meshio_extensions())
+
+
+class _MeshFile:
+    """What a mesh file holds: points, tetrahedra and the point arrays by name."""
+
+    def __init__(self, points, tets, arrays):
+        self.points, self.tets, self.arrays = points, tets, arrays
+
+
+_last_read = {}
+
+
+def _read_mesh_file(path):
+    """The file's content, read once per (path, size, mtime): ``dvr-gl info`` asks for the
+    mesh and its array names without reading a large file twice."""
+    st = os.stat(path)
+    key = (os.path.abspath(path), st.st_size, st.st_mtime_ns)
+    if key not in _last_read:
+        content = _read_npz_mesh(path) if path.lower().endswith(".npz") else _read_meshio(path)
+        _last_read.clear()
+        _last_read[key] = content
+    return _last_read[key]
+
+
+def _read_npz_mesh(path):
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            missing = [k for k in ("points", "tets") if k not in npz.files]
+            if missing:
+                raise InputError("path", f"{path!r} is not a mesh: it lacks {missing} "
+                                         f"(it has {sorted(npz.files)})")
+            points, tets = npz["points"], npz["tets"]
+            arrays = {k: npz[k] for k in npz.files if k not in ("points", "tets")}
+    except InputError:
+        raise
+    except (ValueError, OSError, zlib.error) as e:
+        raise InputError("path", f"cannot read {path!r} as .npz: {e}") from None
+    if tets.dtype.kind not in "iu":
+        raise InputError("tets", f"{path!r}: tets must be integer indices, got dtype {tets.dtype}")
+    if tets.ndim != 2 or tets.shape[1] != 4:
+        raise InputError("tets", f"{path!r}: tets must have shape (M, 4), got {tets.shape}")
+    return _MeshFile(points, tets.astype(np.int64), arrays)
+
+
+def _cell_dimension(cell_type):
+    """3 for solid cells, less for vertices, lines and surface cells; None if unknown."""
+    try:
+        from meshio._mesh import topological_dimension
+        if cell_type in topological_dimension:
+            return topological_dimension[cell_type]
+    except ImportError:
+        pass
+    if cell_type.startswith(_LOW_DIMENSIONAL_PREFIXES):
+        return 2
+    return None
+
+
+def _read_meshio(path):
+    try:
+        import meshio
+    except ImportError as e:
+        raise InputError("path", f"reading {path!r} needs meshio (pip install meshio): {e}") from None
+    m = _meshio_read(meshio, path)
+    blocks, ignored = [], []
+    for block in m.cells:
+        dimension = _cell_dimension(block.type)
+        if block.type in _SPLIT_CELLS:
+            blocks.append((block.type, np.asarray(block.data)))
+        elif dimension is not None and dimension < 3:
+            ignored.append(block.type)
+        else:
+            raise InputError("cells", f"{path!r} has {len(block.data)} cells of type {block.type!r}, which "
+                                      f"cannot be rendered; supported 3-D cells: {', '.join(_SPLIT_CELLS)}")
+    if not blocks:
+        kinds = ", ".join(sorted(set(ignored))) or "none"
+        raise InputError("cells", f"{path!r} has no 3-D cells (cell types: {kinds}); a volume mesh needs "
+                                  f"{', '.join(_SPLIT_CELLS)}")
+    from .cell_split import split_cells
+    try:
+        tets = split_cells(blocks)
+    except (TypeError, ValueError) as e:
+        raise InputError("cells", f"{path!r}: {e}") from None
+    arrays = {name: np.asarray(a) for name, a in m.point_data.items()}
+    return _MeshFile(np.asarray(m.points), tets, arrays)
+
+
+def _meshio_read(meshio, path):
+    """``meshio.read`` for each format the extension allows, with meshio's own printing
+    kept off the terminal: on a malformed file it prints and calls ``sys.exit``."""
+    lower = path.lower()
+    formats = next((types for ext, types in sorted(getattr(meshio, "extension_to_filetypes", {}).items(),
+                                                    key=lambda item: -len(item[0]))
+                    if lower.endswith(ext)), [None])
+    problems = []
+    for file_format in formats:
+        chatter = io.StringIO()
+        try:
+            with contextlib.redirect_stdout(chatter), contextlib.redirect_stderr(chatter):
+                return meshio.read(path, file_format=file_format)
+        except (Exception, SystemExit) as e:  # meshio's readers raise many types for a bad file
+            said = " ".join(chatter.getvalue().split())
+            problems.append(str(e).strip() if isinstance(e, Exception) and str(e).strip()
+                            else said or type(e).__name__)
+    kinds = " or ".join(f for f in formats if f) or "a mesh"
+    raise InputError("path", f"cannot read {path!r} as {kinds}: {'; '.join(problems)}")
+
+
+def _components(array):
+    return 1 if array.ndim == 1 else int(np.prod(array.shape[1:]))
+
+
+def point_arrays(path) -> dict:
+    """A mesh file's point arrays: name -> number of components, in file order."""
+    path = _mesh_path(path)
+    return {name: _components(a) for name, a in _read_mesh_file(path).arrays.items()}
+
+
+def load_mesh(path, scalars=None) -> TetMesh:
+    """Read a mesh file (see the module docstring for formats) with the point array
+    ``scalars`` (default: the first one-component point array) as the field."""
+    path = _mesh_path(path)
+    content = _read_mesh_file(path)
+    arrays = content.arrays
+    listing = ", ".join(f"{n} ({_components(a)} components)" if _components(a) != 1 else n
+                        for n, a in arrays.items()) or "none"
+    if scalars is None:
+        name = next((n for n, a in arrays.items() if _components(a) == 1), None)
+        if name is None:
+            raise InputError("scalars", f"{path!r} has no scalar point array to render "
+                                        f"(point arrays: {listing})")
+    else:
+        name = str(scalars)
+        if name not in arrays:
+            raise InputError("scalars", f"{path!r} has no point array {name!r}; available: {listing}")
+    values = arrays[name]
+    if _components(values) != 1:
+        raise InputError("scalars", f"point array {name!r} in {path!r} has {_components(values)} components; "
+                                    "a scalar field has 1")
+    if values.dtype.kind not in "biuf":
+        raise InputError("scalars", f"point array {name!r} in {path!r} holds {values.dtype}, not numbers")
+    points = np.asarray(content.points, dtype=np.float64)
+    if points.ndim != 2 or points.shape[1] != 3:
+        raise InputError("points", f"{path!r}: points must be (N, 3), got shape {points.shape}")
+    try:
+        return TetMesh(points, content.tets, values.reshape(len(values)).astype(np.float64))
+    except (TypeError, ValueError) as e:
+        raise InputError("mesh", f"{path!r}: {e}") from None
 
 
 # ----------------------------------------------------------------------------- images

@@ -16,7 +16,7 @@ import os
 
 import numpy as np
 
-from .scene import TransferFunction
+from .scene import TetMesh, TransferFunction
 
 LUT_SIZE = 4096
 
@@ -96,8 +96,15 @@ def lut_max_error(tf: TransferFunction, size: int = LUT_SIZE, samples: int = 200
 
 def auto_preset(volume, unit_distance=None) -> TransferFunction:
     """Greyscale ramp whose opacity rises from 0 to 0.5 over the data's 1st to 99th
-    percentile; unit distance one voxel (the smallest spacing) unless given."""
-    values = volume.data[np.isfinite(volume.data)] if volume.has_nonfinite else volume.data
+    percentile; unit distance one voxel (the smallest spacing) unless given. For a
+    TetMesh the percentiles are over its point scalars and the unit distance is one
+    cell (``mesh.cell_size``, the median edge length)."""
+    if isinstance(volume, TetMesh):
+        values = volume.scalars
+        default_unit = volume.cell_size
+    else:
+        values = volume.data[np.isfinite(volume.data)] if volume.has_nonfinite else volume.data
+        default_unit = volume.min_spacing
     lo, hi = (float(v) for v in np.percentile(values, [1, 99]))
     if hi <= lo:
         lo, hi = volume.data_range
@@ -105,7 +112,7 @@ def auto_preset(volume, unit_distance=None) -> TransferFunction:
             hi = lo + 1.0
     return TransferFunction(color=[(lo, 0.0, 0.0, 0.0), (hi, 1.0, 1.0, 1.0)],
                             opacity=[(lo, 0.0), (hi, 0.5)],
-                            unit_distance=unit_distance or volume.min_spacing)
+                            unit_distance=unit_distance or default_unit)
 
 
 def load_tf_json(path) -> TransferFunction:

@@ -23,7 +23,20 @@ arrived for ``settle_s`` seconds, one full-quality frame follows.
 
 Techniques are found through :func:`dvr_gl.techniques.names`; those whose ``make_plan``
 refuses the current volume are left out of the cycle, and options (``step``,
-``preintegrate``, ``interpolate``) are only passed to techniques that take them.
+``preintegrate``, ``interpolate``, ``sort``) are only passed to techniques that take them.
+
+Tetrahedral meshes: :class:`Settings` may hold a :class:`dvr_gl.TetMesh` instead of a
+Volume. Only techniques whose ``make_plan`` accepts a mesh scene are offered (today
+``tetra``: projected tetrahedra); a Settings technique that renders the other kind of data
+(``raycast``, the default) is replaced by the first one that renders this data, and the
+viewer says so. Whatever assumes a grid has a mesh path: tetra takes no step (the ``-`` /
+``=`` keys say so, coarse frames while dragging lower only the resolution), key ``c``
+switches its cell order (``sort``: ``mpvo`` / ``centroid``), the editor's histogram counts
+``mesh.scalars``, the title shows points and tets instead of the grid's shape, modes tetra
+cannot render are skipped with the usual message, and a double click picks along the ray
+through the cells themselves (:func:`pick_point_mesh`: the ray is intersected with every
+tetrahedron, the piecewise-linear field is sampled inside the mesh only, and the same
+rule as on grids picks the point; empty space falls back to the box centre).
 
 glfw is imported inside functions only, so ``import dvr_gl.viewer`` works without it.
 """
@@ -81,7 +94,9 @@ dvr-gl view: keys and mouse
   , / .                iso value down / up (isosurface mode; shift: 5x)
   l                    shading on / off
   p                    pre-integration on / off (techniques that offer it)
-  - / =                coarser / finer step (slice2d: fewer / more interpolated slices)
+  c                    cell order mpvo / centroid (tetra, for meshes)
+  - / =                coarser / finer step (slice2d: fewer / more interpolated slices;
+                       tetra: none, each cell is integrated exactly)
   1..9                 transfer function: 1 the one given, then the presets
   [ / ]                opacity scale down / up
   e                    show / hide the transfer-function editor
@@ -208,18 +223,16 @@ def pick_point(volume, tf, mode, iso_value, origin, direction, samples=512, valu
     """The point a user means by clicking this ray: the first crossing of the iso value
     (isosurface mode), the maximum (mip), else where the accumulated opacity reaches 0.5
     (or the strongest contribution if it never does). None when the ray shows nothing.
-    Trilinear samples from scipy, on the CPU: one ray is cheap."""
+    Trilinear samples from scipy, on the CPU: one ray is cheap. A :class:`TetMesh` is
+    picked by :func:`pick_point_mesh` (``values``: its :func:`mesh_pick_data`)."""
+    if _is_mesh(volume):
+        return pick_point_mesh(volume, tf, mode, iso_value, origin, direction, samples, cells=values)
     from scipy.ndimage import map_coordinates
 
-    lo, hi = volume.bounds
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t_a = (lo - origin) / direction
-        t_b = (hi - origin) / direction
-    t_near = np.where(np.isnan(t_a), -np.inf, np.minimum(t_a, t_b))
-    t_far = np.where(np.isnan(t_b), np.inf, np.maximum(t_a, t_b))
-    t0, t1 = max(float(np.max(t_near)), 0.0), float(np.min(t_far))
-    if not t1 > t0:
+    span = _ray_box(*volume.bounds, origin, direction)
+    if span is None:
         return None
+    t0, t1 = span
     dt = (t1 - t0) / samples
     t = t0 + (np.arange(samples) + 0.5) * dt
     p = origin + t[:, None] * direction
@@ -227,6 +240,29 @@ def pick_point(volume, tf, mode, iso_value, origin, direction, samples=512, valu
     if values is None:
         values = volume.values(np.float32)
     s = map_coordinates(values, index, order=1, mode="nearest")
+    return _pick_along(p, s, dt, tf, mode, iso_value)
+
+
+def _is_mesh(volume):
+    from .scene import TetMesh
+
+    return isinstance(volume, TetMesh)
+
+
+def _ray_box(lo, hi, origin, direction):
+    """(t_enter, t_exit) of the ray in the box [lo, hi] (t_enter >= 0), or None."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t_a = (lo - origin) / direction
+        t_b = (hi - origin) / direction
+    t_near = np.where(np.isnan(t_a), -np.inf, np.minimum(t_a, t_b))
+    t_far = np.where(np.isnan(t_b), np.inf, np.maximum(t_a, t_b))
+    t0, t1 = max(float(np.max(t_near)), 0.0), float(np.min(t_far))
+    return (t0, t1) if t1 > t0 else None
+
+
+def _pick_along(p, s, dt, tf, mode, iso_value):
+    """The picking rule of :func:`pick_point` on samples ``s`` at points ``p`` (in ray
+    order, ``dt`` world units apart)."""
     if mode == "isosurface":
         inside = s >= iso_value
         hit = np.nonzero(inside != inside[0])[0]
@@ -242,6 +278,66 @@ def pick_point(volume, tf, mode, iso_value, origin, direction, samples=512, valu
     weight = alpha * transmittance
     k = int(np.argmax(weight))
     return p[k] if weight[k] > 1e-3 else None
+
+
+def mesh_pick_data(mesh):
+    """What picking on ``mesh`` needs, made once per mesh: for every cell of non-zero
+    volume its first vertex, the inverse of its edge matrix (world point to barycentric
+    coordinates) and its four vertex values."""
+    tets = mesh.tets
+    vol = np.abs(mesh.signed_volumes())
+    ok = np.flatnonzero(vol > 1e-12 * max(float(np.max(vol, initial=0.0)), 1e-300))
+    p = mesh.points[tets[ok]]                                     # (m, 4, 3)
+    edges = np.transpose(p[:, 1:] - p[:, :1], (0, 2, 1))         # columns p1-p0, p2-p0, p3-p0
+    return {"p0": p[:, 0], "inverse": np.linalg.inv(edges), "values": mesh.scalars[tets[ok]]}
+
+
+def ray_cells(mesh, origin, direction, cells=None):
+    """The cells the ray crosses, as ``(t_in, t_out, value_in, slope)`` arrays sorted by
+    ``t_in`` (the ray is ``origin + t * direction``, ``t >= 0``; the field in a cell is
+    ``value_in + slope * (t - t_in)``): each cell's barycentric coordinates are linear in
+    t, and the ray is inside while all four are non-negative."""
+    cells = cells if cells is not None else mesh_pick_data(mesh)
+    inv = cells["inverse"]
+    a = np.einsum("mij,mj->mi", inv, origin - cells["p0"])        # lambda_1..3 at t = 0
+    b = np.einsum("mij,j->mi", inv, direction)                    # and their rates
+    a = np.concatenate([1.0 - a.sum(axis=1, keepdims=True), a], axis=1)
+    b = np.concatenate([-b.sum(axis=1, keepdims=True), b], axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        root = -a / b
+    lower = np.where(b > 0, root, np.where((b == 0) & (a < 0), np.inf, -np.inf)).max(axis=1)
+    upper = np.where(b < 0, root, np.inf).min(axis=1)
+    t_in, t_out = np.maximum(lower, 0.0), upper
+    hit = np.flatnonzero(t_out > t_in)
+    order = hit[np.argsort(t_in[hit], kind="stable")]
+    values = cells["values"][order]
+    rate = (b[order] * values).sum(axis=1)
+    start = (a[order] * values).sum(axis=1) + rate * t_in[order]
+    return t_in[order], t_out[order], start, rate
+
+
+def pick_point_mesh(mesh, tf, mode, iso_value, origin, direction, samples=512, cells=None):
+    """:func:`pick_point` on a TetMesh: the ray is intersected with every cell
+    (:func:`ray_cells`; non-convex meshes and gaps included), the linear field is sampled
+    at ``samples`` points between where it first enters and last leaves the mesh, the
+    samples outside every cell are dropped (they are empty space), and the grid's rule
+    picks among the rest. None when the ray misses the mesh or shows nothing."""
+    origin, direction = np.asarray(origin, np.float64), np.asarray(direction, np.float64)
+    if _ray_box(*mesh.bounds, origin, direction) is None:
+        return None
+    t_in, t_out, start, rate = ray_cells(mesh, origin, direction, cells)
+    if t_in.size == 0:
+        return None
+    t0, t1 = float(t_in[0]), float(t_out.max())
+    dt = (t1 - t0) / samples
+    t = t0 + (np.arange(samples) + 0.5) * dt
+    k = np.searchsorted(t_in, t, side="right") - 1
+    inside = (k >= 0) & (t <= t_out[np.maximum(k, 0)] + 1e-9 * (t1 - t0))
+    if not inside.any():
+        return None
+    t, k = t[inside], k[inside]
+    s = start[k] + rate[k] * (t - t_in[k])
+    return _pick_along(origin + t[:, None] * direction, s, dt, tf, mode, iso_value)
 
 
 # ----------------------------------------------------------------------------- techniques
@@ -260,6 +356,18 @@ class TechniqueInfo:
         return self.params is None or option in self.params
 
 
+def _renders_data_of(name, volume):
+    """Whether technique ``name`` is for this kind of data (its module's ``DATA``:
+    "volume" for grids, "mesh" for TetMesh), whatever else it may refuse."""
+    from .techniques import get_technique
+
+    try:
+        kind = getattr(get_technique(name), "DATA", "volume")
+    except Exception:
+        return False
+    return kind == ("mesh" if _is_mesh(volume) else "volume")
+
+
 def _plan_params(make_plan):
     try:
         sig = inspect.signature(make_plan)
@@ -268,6 +376,26 @@ def _plan_params(make_plan):
     if any(p.kind is p.VAR_KEYWORD for p in sig.parameters.values()):
         return None
     return frozenset(n for n in list(sig.parameters)[2:] if n != "tables")
+
+
+def fallback_step(volume):
+    """The step offered to a technique that takes one but names no default: half the
+    smallest spacing of a grid, half the typical cell size of a mesh (whose technique,
+    tetra, takes no step: only a technique module without ``TAKES_STEP`` is tried with
+    it)."""
+    spacing = getattr(volume, "min_spacing", None)
+    if spacing is None:
+        spacing = getattr(volume, "cell_size", 1.0)
+    return 0.5 * float(spacing)
+
+
+def describe_data(volume):
+    """A few words on the data for the title and the console: the grid's shape (x, y, z),
+    or a mesh's point and cell counts."""
+    if _is_mesh(volume):
+        return f"{volume.n_points} points, {volume.n_tets} tets"
+    nz, ny, nx = volume.shape
+    return f"{nx}x{ny}x{nz}"
 
 
 def probe_technique(name, scene, tables):
@@ -288,7 +416,7 @@ def probe_technique(name, scene, tables):
             default = float(tech.default_step(scene.volume))
         except Exception:
             default = None
-    step_guess = default if default is not None else 0.5 * scene.volume.min_spacing
+    step_guess = default if default is not None else fallback_step(scene.volume)
     flag = getattr(tech, "TAKES_STEP", None)
     tries = [(True, step_guess), (False, None)] if flag is None else [(bool(flag), step_guess if flag else None)]
     reason = ""
@@ -306,7 +434,8 @@ def probe_technique(name, scene, tables):
 
 @dataclass
 class Settings:
-    """What the command line decided."""
+    """What the command line decided. ``volume``: a :class:`dvr_gl.Volume` or a
+    :class:`dvr_gl.TetMesh` (shown with a technique that renders meshes: tetra)."""
     volume: object
     tf: object
     tf_name: str = "auto"
@@ -396,6 +525,13 @@ class Viewer:
             for name in names():
                 self.techniques[name] = probe_technique(name, probe, self.renderer.tables)
             info = self.techniques.get(self.technique)
+            if info is not None and not info.applies and not _renders_data_of(self.technique, self.volume):
+                # e.g. the default raycast on a mesh: the first technique for this kind of data
+                fallback = next(iter(self.available_techniques), None)
+                if fallback is not None:
+                    self.say(f"technique {fallback} ({self.technique} cannot render this data: {info.reason})")
+                    self.technique = fallback
+                    info = self.techniques[fallback]
             if info is None or not info.applies:
                 why = info.reason if info is not None else "unknown technique"
                 raise ValueError(f"--technique: {self.technique} cannot render this data: {why}")
@@ -536,7 +672,7 @@ class Viewer:
             return None
         if self.step is not None:
             return self.step
-        return info.default_step if info.default_step is not None else 0.5 * self.volume.min_spacing
+        return info.default_step if info.default_step is not None else fallback_step(self.volume)
 
     def _default_iso(self):
         """An iso value to start isosurface mode with: where the opacity first reaches
@@ -762,6 +898,8 @@ class Viewer:
             self._try(lambda: setattr(self, "shading", not self.shading), "switch shading")
         elif char == "p":
             self.toggle_option("preintegrate")
+        elif char == "c":
+            self.cycle_sort()
         elif key in (KEY_MINUS, KEY_KP_SUBTRACT):
             self.change_step(coarser=True)
         elif key in (KEY_EQUAL, KEY_KP_ADD):
@@ -849,6 +987,22 @@ class Viewer:
         if self._try(change, f"switch {option} {'on' if on else 'off'}"):
             self.say(f"{option} {'on' if on else 'off'}")
 
+    def cycle_sort(self):
+        """Key c: the next cell order of a technique with a ``sort`` option (tetra:
+        "mpvo", exact per pixel, and "centroid", cheaper)."""
+        if not self.info.accepts("sort") or self.info.params is None:
+            self.say(f"{self.technique} has no sort option (tetra's cell order, for meshes)")
+            return False
+        from .techniques import get_technique
+
+        sorts = tuple(getattr(get_technique(self.technique), "SORTS", ("mpvo", "centroid")))
+        now = self.options.get("sort", sorts[0])
+        new = sorts[(sorts.index(now) + 1) % len(sorts)] if now in sorts else sorts[0]
+        if self._try(lambda: self.options.__setitem__("sort", new), f"use sort {new}"):
+            self.say(f"sort {new}")
+            return True
+        return False
+
     def change_step(self, coarser):
         factor = math.sqrt(2.0)
         if self.info.accepts_step:
@@ -860,6 +1014,9 @@ class Viewer:
             k = int(self.options.get("interpolate", 0)) + (-1 if coarser else 1)
             k = min(max(k, 0), 15)
             self._try(lambda: self.options.__setitem__("interpolate", k), f"use interpolate={k}")
+        elif _is_mesh(self.volume):
+            self.say(f"{self.technique} has a fixed sample distance: it takes no step "
+                     "(each cell is integrated exactly)")
         else:
             self.say(f"{self.technique} has a fixed sample distance")
 
@@ -877,7 +1034,13 @@ class Viewer:
             self.say(f"no transfer function {number}; 1..{len(items)}: {', '.join(n for n, _ in items)}")
             return
         name, make = items[number - 1]
-        self.editor.set_tf(make(self.volume))
+        try:
+            tf = make(self.volume)
+        except (TypeError, ValueError, AttributeError, NotImplementedError) as e:
+            # a preset made for grids (auto, before it learns meshes) on a mesh
+            self.say(f"cannot use transfer function {number} ({name}) here: {e}")
+            return
+        self.editor.set_tf(tf)
         self._tf_edited(interactive=False)
         self.say(f"transfer function {number}: {name}")
 
@@ -912,8 +1075,9 @@ class Viewer:
         direction and distance; on empty space, back to the volume's centre."""
         ww, wh = self.window_size
         origin, direction = self.orbit.ray(x, y, ww, wh)
-        if self._values is None:
-            self._values = self.volume.values(np.float32)
+        if self._values is None:  # float32 samples of a grid, or a mesh's cells
+            self._values = (mesh_pick_data(self.volume) if _is_mesh(self.volume)
+                            else self.volume.values(np.float32))
         p = pick_point(self.volume, self.tf, self.mode, self.iso, origin, direction, values=self._values)
         if p is None:
             lo, hi = self.volume.bounds
@@ -1014,10 +1178,12 @@ class Viewer:
         if "interpolate" in self._options():
             step += f", interpolate {self._options()['interpolate']}"
         extras = [k for k in ("preintegrate",) if self._options().get(k)]
+        if self.info.accepts("sort") and self.info.params is not None:
+            extras.append(str(self._options().get("sort", "mpvo")))
         if self.shading:
             extras.append("shaded")
         mode = self.mode + (f" {self.iso:g}" if self.mode == "isosurface" else "")
-        title = (f"{PROG}: {self.settings.input_name} | {self.technique} {mode}"
+        title = (f"{PROG}: {self.settings.input_name} ({describe_data(self.volume)}) | {self.technique} {mode}"
                  + (f" ({', '.join(extras)})" if extras else "")
                  + f" | {step} | {f.target_size[0]}x{f.target_size[1]} | {1e3 * f.seconds:.1f} ms"
                  + (" (refining)" if f.quality == "coarse" else ""))
@@ -1332,8 +1498,8 @@ def _run(args):
     glfw = viewer._glfw
     try:
         v = settings.volume
-        nz, ny, nx = v.shape
-        print(f"{PROG}: {settings.input_name}: {nx}x{ny}x{nz} (x, y, z) {v.data.dtype}, values "
+        what = (describe_data(v) if _is_mesh(v) else f"{describe_data(v)} (x, y, z) {v.data.dtype}")
+        print(f"{PROG}: {settings.input_name}: {what}, values "
               f"{v.data_range[0]:g}..{v.data_range[1]:g}; transfer function {settings.tf_name}; "
               f"techniques {', '.join(viewer.available_techniques)}", flush=True)
         if args.frames:

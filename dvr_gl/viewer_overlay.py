@@ -13,6 +13,7 @@ The editor is a panel along the bottom of the window:
     |                             the scroll wheel turns the hue)   |
     +--------------------------------------------------------------+
 
+The histogram counts a grid's samples or a tetrahedral mesh's point scalars.
 The horizontal axis is the data value, from the smaller to the larger of the data's range
 and the transfer function's control points. The vertical axis shows ``sqrt(alpha)``:
 typical volume opacities are a few percent, which a linear axis would squash against the
@@ -27,7 +28,7 @@ import math
 
 import numpy as np
 
-from .scene import TransferFunction
+from .scene import TetMesh, TransferFunction
 
 HISTOGRAM_BINS = 128
 CURVE_SAMPLES = 256
@@ -42,10 +43,18 @@ ACTIVE = (1.0, 0.85, 0.2, 1.0)
 ISO = (0.3, 0.9, 1.0, 0.9)
 
 
+def data_values(volume):
+    """The values the histogram counts: a grid's finite samples, or a
+    :class:`~dvr_gl.TetMesh`'s point scalars (always finite)."""
+    if isinstance(volume, TetMesh):
+        return volume.scalars
+    return volume.data[np.isfinite(volume.data)] if volume.has_nonfinite else volume.data
+
+
 def data_histogram(volume, lo, hi, bins=HISTOGRAM_BINS):
-    """Counts of the volume's finite samples in ``bins`` equal bins over [lo, hi],
-    scaled as ``log(1 + count) / log(1 + max count)`` (0..1)."""
-    values = volume.data[np.isfinite(volume.data)] if volume.has_nonfinite else volume.data
+    """Counts of the volume's finite samples (a mesh's point scalars) in ``bins`` equal
+    bins over [lo, hi], scaled as ``log(1 + count) / log(1 + max count)`` (0..1)."""
+    values = data_values(volume)
     counts, _ = np.histogram(values, bins=bins, range=(lo, hi))
     top = float(counts.max()) if counts.size else 0.0
     if top <= 0:

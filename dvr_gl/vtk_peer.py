@@ -3,6 +3,9 @@
 :func:`render_vtk` renders a :class:`dvr_gl.Scene` with ``vtkGPUVolumeRayCastMapper``
 offscreen and returns the image in dvr_gl's convention ((H, W, 4) float32, premultiplied
 RGBA over transparent black, row 0 on top) together with the median seconds per frame.
+A scene whose data is a :class:`dvr_gl.TetMesh` goes to VTK's projected tetrahedra
+(``vtkProjectedTetrahedraMapper``) instead: :func:`render_vtk_mesh` /
+:meth:`VTKPeer.render_mesh` (see "Meshes" below).
 VTK (``pip install vtk``, the ``bench`` extra) is optional: importing this module does
 not import it; the first render does.
 
@@ -61,6 +64,50 @@ Known differences from the exact image
   the lookup table). ``data_as_float=True`` removes the 8-bit part.
 - Early ray termination when the accumulated alpha exceeds 1 - 1/255.
 
+Meshes: projected tetrahedra
+----------------------------
+``vtkOpenGLProjectedTetrahedraMapper`` on a ``vtkUnstructuredGrid`` built from the mesh
+(float64 points, ``VTK_TETRA`` cells, the scalars as float64 point scalars), in the same
+window, renderer, float colour target, camera mapping and read-back as grids; the grid's
+volume actor is hidden while a mesh is drawn and the other way round. Only unshaded
+composite exists there. What VTK does (VTK 9.x source, checked by the tests):
+
+- Sort: every frame, ``vtkCellCenterDepthSort`` (its ``vtkVisibilitySort``) orders the
+  cells back to front by their centroids' projection on the view direction (also in
+  perspective), in batches of 1000 handed to the GL as they are sorted. A centroid order
+  is not a visibility order: neighbouring cells of different sizes, and non-convex
+  meshes, can be drawn out of order (no gap or cycle handling). Gaps in a non-convex
+  domain need nothing: nothing is drawn there.
+- Classification at the vertices only, in 8 bits: colour and "opacity" are looked up at
+  each vertex, truncated to ``floor(v * 255.9999) / 255`` and interpolated linearly over
+  the projected triangles (pre-classification). Each tet is split into 3 or 4 triangles
+  round its thick vertex (Shirley-Tuchman), whose thickness L is exact under an
+  orthographic camera and from a 2048-entry square-root table in perspective; the
+  fragment gets ``A = 1 - exp(-att * L / unit)`` with ``att`` the mean of the front and
+  back values and colour the mean colour, blended (SRC_ALPHA, ONE_MINUS_SRC_ALPHA;
+  alpha ONE, ONE_MINUS_SRC_ALPHA): premultiplied RGBA over transparent black.
+- Unit distance: VTK reads the scalar opacity as an *extinction* per
+  ``ScalarOpacityUnitDistance`` (``1 - exp(-alpha L / u)``), not as the opacity of a slab
+  u thick (``1 - (1 - alpha)^(L / u)``). The peer therefore gives VTK ``att = tau / tau_max``
+  and unit distance ``1 / tau_max`` (:func:`pt_attenuation`), which is the contract's
+  absorption with the 8 bits spent on the range used; ``native_opacity=True`` passes the
+  opacity points and ``tf.unit_distance`` unchanged instead (e.g. 18 % less alpha for
+  alpha = 0.5 over one unit distance).
+- Accuracy (tests/test_vtk_peer.py): a constant cube seen orthographically is the closed
+  form to 4e-7; in perspective the per-tet linear thickness is off by up to 7e-2 in alpha
+  for one cube of 6 tets filling the view, falling ~4x per halving of the cells; a field
+  varying through the cells is off by ~0.1 with 2 cells across a ray and ~0.01 with 8.
+- Near plane: a tet with any vertex in front of the near plane is dropped whole (the
+  clipping range is reset to the mesh's bounds, so this happens only with the eye inside
+  or near the mesh).
+- First frame: the mapper binds its vertex attributes only after its first draw, so its
+  very first frame lacks the first batch of (up to 1000, farthest) cells; the peer renders
+  that frame once, untimed, when it makes the mapper.
+- Timing: a frame is ``Render()`` plus the float read-back, as for grids. The mapper's
+  sort, projection (one CPU thread) and per-batch uploads and draws run inside
+  ``Render()``; ``last_mesh_timings["mapper_draw"]`` holds the mapper's own
+  ``TimeToDraw`` per frame, and :meth:`VTKPeer.sort_seconds` times its visibility sort alone.
+
 Headless rendering
 ------------------
 ``vtkEGLRenderWindow`` with ``OffScreenRendering`` on: on a machine without a display
@@ -77,7 +124,7 @@ import time
 
 import numpy as np
 
-__all__ = ["VTKPeer", "render_vtk", "renderer_string", "available", "SUPPORTED_MODES"]
+__all__ = ["VTKPeer", "render_vtk", "render_vtk_mesh", "renderer_string", "available", "SUPPORTED_MODES"]
 
 SUPPORTED_MODES = ("composite", "mip", "minip", "average", "isosurface")
 
@@ -133,12 +180,14 @@ def _import_vtk():
         from types import SimpleNamespace
 
         from vtkmodules.util import numpy_support
-        from vtkmodules.vtkCommonCore import VTK_FLOAT
-        from vtkmodules.vtkCommonDataModel import vtkImageData, vtkPiecewiseFunction
+        from vtkmodules.vtkCommonCore import VTK_FLOAT, vtkPoints
+        from vtkmodules.vtkCommonDataModel import (VTK_TETRA, vtkCellArray, vtkImageData,
+                                                   vtkPiecewiseFunction, vtkUnstructuredGrid)
         from vtkmodules.vtkRenderingCore import (vtkColorTransferFunction, vtkRenderer,
                                                  vtkRenderWindow, vtkVolume, vtkVolumeProperty)
         import vtkmodules.vtkRenderingOpenGL2 as gl2
-        from vtkmodules.vtkRenderingVolumeOpenGL2 import vtkOpenGLGPUVolumeRayCastMapper
+        from vtkmodules.vtkRenderingVolumeOpenGL2 import (vtkOpenGLGPUVolumeRayCastMapper,
+                                                          vtkOpenGLProjectedTetrahedraMapper)
 
         _vtk = SimpleNamespace(
             ns=numpy_support, VTK_FLOAT=VTK_FLOAT, vtkImageData=vtkImageData,
@@ -146,7 +195,9 @@ def _import_vtk():
             vtkColorTransferFunction=vtkColorTransferFunction, vtkRenderer=vtkRenderer,
             vtkRenderWindow=vtkRenderWindow, vtkVolume=vtkVolume,
             vtkVolumeProperty=vtkVolumeProperty, gl2=gl2,
-            Mapper=vtkOpenGLGPUVolumeRayCastMapper)
+            Mapper=vtkOpenGLGPUVolumeRayCastMapper, PTMapper=vtkOpenGLProjectedTetrahedraMapper,
+            vtkPoints=vtkPoints, vtkCellArray=vtkCellArray, vtkUnstructuredGrid=vtkUnstructuredGrid,
+            VTK_TETRA=VTK_TETRA)
     return _vtk
 
 
@@ -208,6 +259,15 @@ class VTKPeer:
         self._tf_key = None
         self._image = None
         self._size = None
+        # The projected-tetrahedra pipeline, made on the first mesh scene.
+        self.pt_mapper = None
+        self.pt_property = None
+        self.pt_actor = None
+        self._mesh = None
+        self._grid = None
+        self._pt_key = None
+        self._pt_primed = False
+        self.last_mesh_timings = None
 
     # -- scene -> VTK ------------------------------------------------------------
     def _set_volume(self, volume):
@@ -308,6 +368,10 @@ class VTKPeer:
 
     def setup(self, scene, step):
         """Point the pipeline at ``scene`` sampled every ``step`` world units."""
+        if scene.is_mesh:
+            raise TypeError("a TetMesh scene is rendered by setup_mesh / render_mesh (projected tetrahedra)")
+        if step is None:
+            raise TypeError("step (world units) is required for a Volume scene")
         step = float(step)
         if not np.isfinite(step) or step <= 0:
             raise ValueError(f"step must be a positive number of world units, got {step!r}")
@@ -320,12 +384,158 @@ class VTKPeer:
             self._size = (scene.width, scene.height)
         self._set_volume(scene.volume)
         self._set_classification(scene)
+        self.actor.SetVisibility(True)
+        if self.pt_actor is not None:
+            self.pt_actor.SetVisibility(False)
         self.mapper.SetSampleDistance(step)
         self._set_camera(scene)
         self._mode = scene.mode
         self._tf = scene.tf
         rng = self._image.GetPointData().GetScalars().GetRange()
         self._scalar_range = (float(rng[0]), float(rng[1]))
+
+    # -- meshes: projected tetrahedra -------------------------------------------
+    def _ensure_pt(self):
+        if self.pt_mapper is not None:
+            return
+        v = self._v
+        self.pt_mapper = v.PTMapper()
+        self.pt_property = v.vtkVolumeProperty()
+        self.pt_property.ShadeOff()
+        self.pt_property.SetInterpolationTypeToLinear()
+        self.pt_actor = v.vtkVolume()
+        self.pt_actor.SetMapper(self.pt_mapper)
+        self.pt_actor.SetProperty(self.pt_property)
+        self.renderer.AddVolume(self.pt_actor)
+
+    def _set_mesh(self, mesh):
+        if self._mesh is mesh:
+            return
+        v = self._v
+        ns = v.ns
+        pts = v.vtkPoints()
+        pts.SetData(ns.numpy_to_vtk(np.ascontiguousarray(mesh.points, dtype=np.float64), deep=True))
+        m = mesh.n_tets
+        conn = ns.numpy_to_vtkIdTypeArray(np.ascontiguousarray(mesh.tets, dtype=np.int64).ravel(), deep=True)
+        offsets = ns.numpy_to_vtkIdTypeArray(np.arange(0, 4 * m + 1, 4, dtype=np.int64), deep=True)
+        cells = v.vtkCellArray()
+        cells.SetData(offsets, conn)
+        grid = v.vtkUnstructuredGrid()
+        grid.SetPoints(pts)
+        grid.SetCells(v.VTK_TETRA, cells)
+        arr = ns.numpy_to_vtk(np.ascontiguousarray(mesh.scalars, dtype=np.float64), deep=True)
+        arr.SetName("scalars")
+        grid.GetPointData().SetScalars(arr)
+        self.pt_mapper.SetInputData(grid)
+        self._grid = grid
+        self._mesh = mesh
+
+    def _set_mesh_classification(self, tf, native_opacity):
+        key = (tf.key(), bool(native_opacity))
+        if key == self._pt_key:
+            return
+        v = self._v
+        ctf = v.vtkColorTransferFunction()
+        ctf.SetColorSpaceToRGB()
+        ctf.ClampingOn()
+        for s, r, g, b in tf.color_points:
+            ctf.AddRGBPoint(float(s), float(r), float(g), float(b))
+        otf = v.vtkPiecewiseFunction()
+        otf.ClampingOn()
+        if native_opacity:
+            # As a VTK user would: VTK reads these values as extinction per unit distance.
+            for s, a in tf.opacity_points:
+                otf.AddPoint(float(s), float(a))
+            unit = tf.unit_distance
+        else:
+            s, att, unit = pt_attenuation(tf)
+            for x, y in zip(s, att):
+                otf.AddPoint(float(x), float(y))
+        p = self.pt_property
+        p.SetColor(ctf)
+        p.SetScalarOpacity(otf)
+        p.SetScalarOpacityUnitDistance(unit)
+        self.pt_unit_distance = unit
+        self._pt_key = key
+
+    def setup_mesh(self, scene, native_opacity=False):
+        """Point the projected-tetrahedra pipeline at the mesh scene ``scene``.
+
+        ``native_opacity=False`` (default) converts the transfer function's opacity into
+        the extinction VTK's PT mapper expects (see :func:`pt_attenuation`), so that a
+        cell absorbs as the contract says; ``True`` passes the opacity points and
+        ``tf.unit_distance`` to VTK unchanged, as a VTK user would, and VTK then reads
+        ``alpha`` as the extinction times the unit distance (``1 - exp(-alpha L / u)``
+        instead of ``1 - (1 - alpha)^(L / u)``)."""
+        if not scene.is_mesh:
+            raise TypeError("setup_mesh needs a TetMesh scene; a Volume scene is rendered by setup / render")
+        if scene.mode != "composite" or scene.shading:
+            raise NotImplementedError(
+                f"VTK's projected tetrahedra render only unshaded composite, not mode={scene.mode!r}"
+                + (" with shading" if scene.shading else ""))
+        self._ensure_pt()
+        if (scene.width, scene.height) != self._size:
+            self.window.SetSize(scene.width, scene.height)
+            self._size = (scene.width, scene.height)
+        self._set_mesh(scene.volume)
+        self._set_mesh_classification(scene.tf, native_opacity)
+        self.actor.SetVisibility(False)
+        self.pt_actor.SetVisibility(True)
+        self._set_camera(scene)
+        self._mode = "composite"
+        self._tf = scene.tf
+        if not self._pt_primed:
+            # VTK's PT mapper drops the first batch of cells (up to 1000, the farthest)
+            # of its very first frame: it binds its vertex attributes only once its
+            # index buffer has been filled, which happens after that first draw.
+            self.frame()
+            self._pt_primed = True
+
+    def render_mesh(self, scene, repeats=5, warmup=1, turn=None, native_opacity=False):
+        """Render the mesh scene ``scene`` with VTK's projected tetrahedra; returns
+        ``(image, times)``: the last frame's image and the seconds of each of the
+        ``repeats`` timed frames (after ``warmup`` untimed ones). A timed frame is
+        ``Render()`` plus the float read-back, as for grids. ``turn``, if given, maps the
+        timed frame's index i to a :class:`dvr_gl.Camera` used for that frame (a new view
+        every frame; warm-up frames use the scene's camera). VTK sorts the cells again
+        every frame in any case. ``self.last_mesh_timings`` holds the frame times and
+        the mapper's own ``TimeToDraw`` (the CPU time of its sort, projection and draw
+        calls, without waiting for the GL) of every timed frame."""
+        self.setup_mesh(scene, native_opacity=native_opacity)
+        image = None
+        for _ in range(max(0, int(warmup))):
+            image = self.frame()
+        times, draws = [], []
+        for i in range(max(1, int(repeats))):
+            if turn is not None:
+                self._set_camera(scene.replace(camera=turn(i)))
+            t0 = time.perf_counter()
+            image = self.frame()
+            times.append(time.perf_counter() - t0)
+            draws.append(float(self.pt_mapper.GetTimeToDraw()))
+        if turn is not None:
+            self._set_camera(scene)
+        self.last_mesh_timings = {"frame": times, "mapper_draw": draws}
+        return image, times
+
+    def sort_seconds(self, scene, repeats=5):
+        """Median seconds of the PT mapper's own visibility sort (its
+        ``vtkVisibilitySort``, by default ``vtkCellCenterDepthSort``) traversed in full
+        for ``scene``'s camera, back to front, as the mapper does it each frame."""
+        self.setup_mesh(scene)
+        sort = self.pt_mapper.GetVisibilitySort()
+        sort.SetInput(self._grid)
+        sort.SetDirectionToBackToFront()
+        sort.SetCamera(self.renderer.GetActiveCamera())
+        sort.SetMaxCellsReturned(1000)
+        times = []
+        for _ in range(max(1, int(repeats)) + 1):
+            t0 = time.perf_counter()
+            sort.InitTraversal()
+            while sort.GetNextCells() is not None:
+                pass
+            times.append(time.perf_counter() - t0)
+        return statistics.median(times[1:])
 
     # -- frames ------------------------------------------------------------------
     def _read(self):
@@ -362,10 +572,14 @@ class VTKPeer:
             self.window.Render()
             return self._read()
 
-    def render(self, scene, step, repeats=5, warmup=1):
+    def render(self, scene, step=None, repeats=5, warmup=1):
         """Render ``scene``; returns (image, median seconds per frame over ``repeats``
         frames after ``warmup`` untimed frames). Each timed frame is ``Render()`` plus
-        the float read-back, so it ends only when the GL has finished."""
+        the float read-back, so it ends only when the GL has finished. A mesh scene
+        goes to :meth:`render_mesh` (``step`` is then ignored)."""
+        if scene.is_mesh:
+            image, times = self.render_mesh(scene, repeats=repeats, warmup=warmup)
+            return image, statistics.median(times)
         self.setup(scene, step)
         image = None
         for _ in range(max(0, int(warmup))):
@@ -419,12 +633,53 @@ def _peer(data_as_float=False):
     return _shared[key]
 
 
-def render_vtk(scene, step, repeats=5, warmup=1, data_as_float=False):
+def render_vtk(scene, step=None, repeats=5, warmup=1, data_as_float=False):
     """Render ``scene`` through VTK's GPU ray caster at sample distance ``step`` (world
-    units). Returns ``(image, seconds)``: image (H, W, 4) float32 premultiplied RGBA,
-    row 0 on top; seconds the median time per frame over ``repeats`` frames after
-    ``warmup`` frames. Uses one shared offscreen window per process."""
+    units), or a mesh scene through VTK's projected tetrahedra (``step`` ignored).
+    Returns ``(image, seconds)``: image (H, W, 4) float32 premultiplied RGBA, row 0 on
+    top; seconds the median time per frame over ``repeats`` frames after ``warmup``
+    frames. Uses one shared offscreen window per process."""
     return _peer(data_as_float).render(scene, step, repeats=repeats, warmup=warmup)
+
+
+def render_vtk_mesh(scene, repeats=5, warmup=1, turn=None, native_opacity=False):
+    """Render a :class:`dvr_gl.TetMesh` scene through ``vtkProjectedTetrahedraMapper``.
+    Returns ``(image, times)``: image as :func:`render_vtk`'s, times the seconds of each
+    timed frame (see :meth:`VTKPeer.render_mesh` for ``turn`` and ``native_opacity``).
+    Uses the same shared window as :func:`render_vtk`."""
+    return _peer().render_mesh(scene, repeats=repeats, warmup=warmup, turn=turn,
+                               native_opacity=native_opacity)
+
+
+ALPHA_CAP = 1.0 - 1.0 / 1024
+
+
+def pt_attenuation(tf, per_segment=16):
+    """The opacity function and unit distance that make VTK's PT mapper absorb as the
+    contract says. Returns ``(s, att, unit)``: control points ``(s, att)`` for VTK's
+    scalar opacity and its ``ScalarOpacityUnitDistance``.
+
+    VTK's PT mapper reads the scalar opacity ``att`` (8-bit, ``floor(att * 255.9999) /
+    255``, so in [0, 1]) as an extinction: a cell of thickness L absorbs
+    ``1 - exp(-att * L / unit)``. The contract's extinction is ``tau(s) = -ln(1 -
+    alpha(s)) / u``, so ``att = tau / tau_max`` with ``unit = 1 / tau_max`` spends the
+    8 bits on the range the function uses (the largest extinction is 1.0, exact).
+    ``tau`` is not linear between the opacity points, so each segment gets
+    ``per_segment`` pieces (VTK classifies at the vertices only, so this matters only
+    there). Opacities above ``ALPHA_CAP`` (1 - 1/1024) are capped: ``alpha = 1`` is an
+    infinite extinction that no finite table holds."""
+    pts = tf.opacity_points
+    if len(pts) == 1:
+        s = pts[:, 0].copy()
+    else:
+        s = np.unique(np.concatenate([np.linspace(a, b, per_segment + 1)
+                                      for a, b in zip(pts[:-1, 0], pts[1:, 0])]))
+    alpha = np.minimum(tf.opacity(s), ALPHA_CAP)
+    tau = -np.log1p(-alpha) / tf.unit_distance
+    tau_max = float(tau.max())
+    if tau_max <= 0:
+        return s, np.zeros_like(s), tf.unit_distance
+    return s, tau / tau_max, 1.0 / tau_max
 
 
 def renderer_string():

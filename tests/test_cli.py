@@ -308,3 +308,140 @@ def test_render_slicing_options(renderer, tiny, capsys):
                           (["--technique", "slice3d", "--mode", "mip"], "slice3d renders mode 'composite', got mode 'mip'")):
         code, _, err = _run(["render", d / "tiny.npy", "--out", out] + argv, capsys)
         assert code == 2 and message in err, err
+
+
+# ============================================================================ meshes
+
+@pytest.fixture
+def tiny_mesh(tmp_path):
+    """The tiny ramp's grid as a tetrahedral .vtu (a scalar 'ramp' after a vector 'wind'
+    and before a scalar 'twice'), and as .npz."""
+    import meshio
+    from dvr_gl.cell_split import grid_to_tets
+
+    z, y, x = np.meshgrid(np.arange(4), np.arange(5), np.arange(6), indexing="ij")
+    a = (x + 2 * y + 3 * z).astype(np.float32)
+    a[1:3, 1:4, 2:4] += 20
+    mesh = grid_to_tets(dvr_gl.Volume(a))
+    path = tmp_path / "tiny.vtu"
+    meshio.write(str(path), meshio.Mesh(mesh.points, [("tetra", mesh.tets)],
+                                        point_data={"wind": mesh.points * 2, "ramp": mesh.scalars,
+                                                    "twice": 2 * mesh.scalars}))
+    np.savez(tmp_path / "tiny_mesh.npz", points=mesh.points, tets=mesh.tets, ramp=mesh.scalars)
+    return tmp_path, mesh
+
+
+def test_render_mesh_writes_what_the_library_renders(renderer, tiny_mesh, capsys):
+    d, mesh = tiny_mesh
+    out = d / "mesh.png"
+    code, stdout, err = _run(["render", d / "tiny.vtu", "--size", "32x32", "--elevation", "20", "--out", out], capsys)
+    assert code == 0, err
+    mode, px = _png(out)
+    assert mode == "RGBA" and px.shape == (32, 32, 4) and px[..., 3].max() > 0 and px[0, 0, 3] == 0
+    scene = dvr_gl.Scene(mesh, auto_preset(mesh), dvr_gl.default_camera(mesh, 0, 20), 32, 32)
+    assert np.array_equal(px, to_png_array(renderer.render(scene, technique="tetra")))
+    assert f"{mesh.n_points} points, {mesh.n_tets} tets, scalars ramp" in stdout
+    assert "tetra" in stdout and "sort mpvo" in stdout and "spacing" not in stdout
+    # --scalars and --sort reach the loader and the technique
+    code, stdout, err = _run(["render", d / "tiny.vtu", "--size", "32x32", "--scalars", "twice", "--sort", "centroid",
+                              "--technique", "tetra", "--target", "rgba16f", "--out", out], capsys)
+    assert code == 0, err
+    assert f"scalars twice 0..{2 * mesh.data_range[1]:g}" in stdout and "sort centroid" in stdout and "rgba16f" in stdout
+
+
+def test_mesh_input_picks_tetra_and_takes_its_options(tiny_mesh, tiny):
+    d, _ = tiny_mesh
+    parser = cli.build_parser()
+    args = parser.parse_args(["render", str(d / "tiny.vtu"), "--out", "x.png", "--sort", "centroid"])
+    assert cli.technique_options(args) == {"technique": "tetra", "sort": "centroid"}
+    args = parser.parse_args(["render", str(d / "tiny_mesh.npz"), "--out", "x.png"])
+    assert cli.technique_options(args) == {"technique": "tetra"}
+    args = parser.parse_args(["render", str(tiny[0] / "tiny.npy"), "--out", "x.png"])
+    assert cli.technique_options(args) == {"technique": "raycast"}
+    # raw geometry makes any name a volume, even one meshio claims (.dat, .vol)
+    args = parser.parse_args(["render", "scan.dat", "--out", "x.png", "--shape", "4,5,6", "--dtype", "float32"])
+    assert cli.technique_options(args) == {"technique": "raycast"}
+    volume, preset = cli._load_input(parser.parse_args(["render", str(d / "tiny.vtu"), "--out", "x.png",
+                                                        "--scalars", "twice"]))
+    assert isinstance(volume, dvr_gl.TetMesh) and volume.data_range == (0.0, 70.0) and preset == "auto"
+
+
+@pytest.mark.parametrize("name, extra, option, fragment", [
+    ("tiny.vtu", ["--technique", "raycast"], "--technique", "raycast renders grid volumes"),
+    ("tiny.vtu", ["--technique", "slice3d"], "--technique", "use --technique tetra"),
+    ("tiny.npy", ["--technique", "tetra"], "--technique", "use --technique raycast, slice2d or slice3d"),
+    ("tiny.npy", ["--scalars", "ramp"], "--scalars", "grid volume"),
+    ("tiny.npy", ["--sort", "mpvo"], "--sort", "applies to --technique tetra only, not raycast"),
+    ("tiny.vtu", ["--sort", "bubble"], "argument --sort", "'bubble'"),
+    ("tiny.vtu", ["--step", "0.5"], "--step", "tetra integrates each cell exactly"),
+    ("tiny.vtu", ["--preintegrate"], "--preintegrate", "not tetra"),
+    ("tiny.vtu", ["--interpolate", "1"], "--interpolate", "slice2d only, not tetra"),
+    ("tiny.vtu", ["--spacing", "1,1,1"], "--spacing", "grid volumes, not the mesh"),
+    ("tiny.vtu", ["--mask-nonfinite"], "--mask-nonfinite", "grid volumes"),
+    ("tiny.vtu", ["--scalars", "nope"], "--scalars", "no point array 'nope'; available: wind (3 components), ramp, twice"),
+    ("tiny.vtu", ["--scalars", "wind"], "--scalars", "has 3 components"),
+    ("missing.vtu", [], "INPUT", "no such file"),
+])
+def test_bad_mesh_options_exit_2(tiny_mesh, tiny, capsys, name, extra, option, fragment):
+    d, _ = tiny_mesh
+    np.save(d / "tiny.npy", tiny[1])
+    out = d / "never.png"
+    code, stdout, err = _run(["render", d / name, "--out", out] + extra, capsys)
+    assert code == 2
+    last = err.strip().splitlines()[-1]  # argparse's own errors follow the usage lines
+    assert option in last and fragment in last, err
+    assert "Traceback" not in err and (option.startswith("argument") or err.count("\n") == 1)
+    assert not out.exists() and stdout == ""
+
+
+def test_unsupported_cells_exit_2(tmp_path, capsys):
+    import meshio
+
+    pts = np.random.default_rng(0).random((10, 3))
+    meshio.write(str(tmp_path / "q.vtu"), meshio.Mesh(pts, [("tetra10", np.arange(10)[None])],
+                                                      point_data={"s": np.zeros(10)}))
+    code, _, err = _run(["render", tmp_path / "q.vtu", "--out", tmp_path / "x.png"], capsys)
+    assert code == 2 and "INPUT" in err and "'tetra10'" in err and "Traceback" not in err
+
+
+def test_info_describes_a_mesh_file(tiny_mesh, capsys):
+    d, mesh = tiny_mesh
+    code, out, err = _run(["info", d / "tiny.vtu", "--scalars", "twice"], capsys)
+    assert code == 0, err
+    assert f"points     {mesh.n_points}\n" in out and f"tets       {mesh.n_tets} (0 of zero volume)" in out
+    assert "bounds     x 0..5, y 0..4, z 0..3" in out
+    assert "wind (3 components), ramp, twice *" in out and "range      0..70 (twice)" in out
+    assert "egl" not in out and "osmesa" not in out  # no GL report
+    code, out, err = _run(["info", d / "tiny_mesh.npz"], capsys)
+    assert code == 0 and "range      0..35 (ramp)" in out
+
+
+def test_info_counts_flat_tets(tmp_path, capsys):
+    pts = np.array([(0, 0, 0), (1, 0, 0), (0, 1, 0), (0, 0, 1), (1, 1, 0)], float)
+    np.savez(tmp_path / "flat.npz", points=pts, tets=np.array([[0, 1, 2, 3], [0, 1, 2, 4]]), s=np.arange(5.0))
+    code, out, err = _run(["info", tmp_path / "flat.npz"], capsys)
+    assert code == 0 and "tets       2 (1 of zero volume)" in out, out + err
+
+
+def test_info_describes_a_volume_file(tiny, capsys):
+    d, a = tiny
+    code, out, err = _run(["info", d / "tiny.npy"], capsys)
+    assert code == 0, err
+    assert "shape      6x5x4 (x, y, z)" in out and "dtype      float32" in out
+    assert "spacing    1,1,1" in out and f"range      0..{a.max():g}" in out
+    code, out, err = _run(["info", d / "tiny.raw", "--shape", "4,5,6", "--dtype", "float32", "--spacing", "1,1,2"], capsys)
+    assert code == 0 and "spacing    1,1,2" in out, err
+    code, out, err = _run(["info", "builtin:ct_head"], capsys)
+    assert code == 0 and "shape      64x64x93" in out and "int16" in out
+
+
+@pytest.mark.parametrize("argv, fragment", [
+    (["missing.vtu"], "INPUT: no such file"),
+    (["tiny.npy", "--scalars", "x"], "--scalars: chooses a mesh's point array"),
+    (["tiny.raw"], "--shape: a raw file"),
+])
+def test_info_file_errors_exit_2(tiny, capsys, argv, fragment):
+    d, _ = tiny
+    code, out, err = _run(["info", d / argv[0]] + argv[1:], capsys)
+    assert code == 2 and err.startswith("dvr-gl info: error: ") and fragment in err, err
+    assert "Traceback" not in err

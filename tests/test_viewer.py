@@ -152,7 +152,13 @@ def assert_matches_headless(v, renderer, image8):
 
 # ----------------------------------------------------------------------------- agreement
 
-@pytest.mark.parametrize("technique", technique_names())
+def _grid_techniques():
+    """The techniques for grid volumes (the head); tetra (DATA "mesh") has its own tests."""
+    from dvr_gl.techniques import get_technique
+    return [n for n in technique_names() if getattr(get_technique(n), "DATA", "volume") == "volume"]
+
+
+@pytest.mark.parametrize("technique", _grid_techniques())
 def test_screenshot_matches_headless(open_viewer, renderer, tmp_path, technique):
     v = head_viewer(open_viewer, "--technique", technique, "--screenshot", str(tmp_path / "shot.png"))
     v.refine()
@@ -729,3 +735,245 @@ def test_window_opens_after_a_headless_egl_context(display, tmp_path):
     proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120,
                           cwd=tmp_path)
     assert proc.returncode == 0 and "frame full" in proc.stdout, proc.stderr
+
+
+# ----------------------------------------------------------------------------- tetrahedral meshes
+
+@pytest.fixture
+def mesh_viewer(display):
+    """Open viewers on ``data.delaunay_ball()`` (with ``synthetic_tf()``) through
+    :class:`Settings`, as ``dvr-gl view`` does with a mesh file; checked for GL errors and
+    closed after the test."""
+    made = []
+
+    def make(**settings):
+        settings = {"volume": data.delaunay_ball(), "tf": data.synthetic_tf(), "tf_name": "synthetic",
+                    "input_name": "ball", "size": (160, 120), **settings}
+        v = viewer_mod.Viewer(viewer_mod.Settings(**settings))
+        made.append(v)
+        return v
+
+    yield make
+    for v in made:
+        if v.window is not None:
+            with current(v.ctx):
+                assert v.ctx.error == "GL_NO_ERROR"
+        v.close()
+
+
+def _tetra():
+    from dvr_gl.techniques import get_technique
+    return get_technique("tetra")
+
+
+def _ball_region(image, panel_top):
+    """Pixels of the window above the editor panel, where the ball is drawn."""
+    return image[:panel_top]
+
+
+def test_mesh_opens_with_tetra_and_shows_the_ball(mesh_viewer):
+    v = mesh_viewer()                                   # Settings' default technique is raycast
+    assert v.technique == "tetra" and v.available_techniques == ["tetra"]
+    assert "technique tetra" in v.messages[-1] and "raycast" in v.messages[-1]
+    for name in ("raycast", "slice2d", "slice3d"):
+        if name in v.techniques:
+            assert not v.techniques[name].applies and "TetMesh" in v.techniques[name].reason
+    assert not v.info.accepts_step and v.effective_step() is None
+    scene, name, step, options = v.render_arguments()
+    assert scene.is_mesh and name == "tetra" and step is None
+    v.refine()
+    assert v.last_frame.quality == "full" and v.last_frame.target_size == (160, 120) and v.last_frame.step is None
+    assert "4000 points" in v.title and "tets" in v.title and "tetra composite" in v.title
+    # the render: the ball's torus and blob in the middle, nothing in the corners
+    image = v.render_image()
+    assert image.shape == (120, 160, 4)
+    assert image[..., 3].max() > 0.5 and (image[..., 3] > 0.01).mean() > 0.03
+    assert image[:8, :8, 3].max() == 0 and image[-8:, -8:, 3].max() == 0
+    # the window as shown: the render over the background, the editor below
+    pixels = v.frame(quality="full", grab=True)
+    top = int(v.editor.panel[1]) - 1
+    shown = _ball_region(pixels, top)
+    assert shown.max() > 100 and (shown.max(axis=2) > 20).mean() > 0.03
+    # the editor's histogram counts the mesh's point scalars
+    from dvr_gl.viewer_overlay import data_histogram
+    e = v.editor
+    assert e.lo <= v.volume.data_range[0] and e.hi >= v.volume.data_range[1]
+    assert np.allclose(e.histogram, data_histogram(v.volume, e.lo, e.hi)) and e.histogram.max() == 1.0
+    counts, _ = np.histogram(v.volume.scalars, bins=len(e.histogram), range=(e.lo, e.hi))
+    assert np.array_equal(e.histogram > 0, counts > 0)
+
+
+def test_mesh_screenshot_matches_headless(mesh_viewer, renderer, tmp_path):
+    v = mesh_viewer(screenshot=str(tmp_path / "ball.png"), elevation=30.0)
+    v.refine()
+    press(v, "s")
+    image = png(tmp_path / "ball.png")
+    assert image.shape == (120, 160, 4) and image[..., 3].max() > 100, "the ball must show"
+    assert image[60, 80, 3] > 0 and image[0, 0, 3] == 0
+    scene, name, step, options = v.render_arguments()
+    headless = dvr_io.to_png_array(renderer.render(scene, name, step, **options))
+    diff = int(np.abs(image.astype(int) - headless.astype(int)).max())
+    with current(v.ctx):
+        window_gl = v.ctx.info["GL_RENDERER"]
+    if window_gl == renderer.info().get("renderer", renderer.info().get("GL_RENDERER")):
+        assert diff <= 1, f"same driver ({window_gl}), yet {diff} levels apart"
+    else:  # two drivers blending the same float fragments: close, not bit-equal
+        assert np.abs(image.astype(int) - headless.astype(int)).mean() < 1.0 and diff <= 16
+
+
+def test_mesh_orbit_sort_and_modes(mesh_viewer):
+    v = mesh_viewer()
+    v.refine()
+    before = v.render_image()
+    back = v.orbit.back.copy()
+    drag(v, (80, 40), (110, 30))                        # orbit: a new view of the ball
+    assert not np.allclose(v.orbit.back, back)
+    v.refine()
+    after = v.render_image()
+    assert after[..., 3].max() > 0.5 and np.abs(after - before).max() > 0.05
+    # c: tetra's cell order, mpvo <-> centroid, passed as its sort option
+    assert v.render_arguments()[3].get("sort", "mpvo") == "mpvo" and "(mpvo)" in v.title
+    press(v, "c")
+    assert v.render_arguments()[3] == {"sort": "centroid"} and v.messages[-1] == "sort centroid"
+    v.refine()
+    assert "(centroid)" in v.title
+    centroid = v.render_image()
+    assert centroid[..., 3].max() > 0.5
+    assert np.abs(centroid - after).mean() < 0.01      # another order of the same cells
+    press(v, "c")
+    assert v.render_arguments()[3] == {"sort": "mpvo"}
+    v.refine()
+    assert np.abs(v.render_image() - after).max() < 1e-6
+    # m: every mode tetra renders is reached; the others are skipped and named, never crash
+    modes = _tetra().MODES
+    seen = []
+    for _ in range(len(modes)):                        # a full cycle through tetra's modes
+        press(v, "m")
+        seen.append(v.mode)
+        v.refine()
+        assert v.last_frame.quality == "full" and v.technique == "tetra"
+        if v.mode in ("composite", "mip"):               # (minip: the ball's minimum is clear)
+            assert v.render_image()[..., 3].max() > 0.1
+    assert set(seen) == set(modes) and seen[-1] == "composite"
+    if len(modes) == 1:
+        assert "tetra renders only mode composite" in v.messages[-1]
+    else:
+        assert any("tetra cannot render isosurface" in m for m in v.messages)
+    # keys for options tetra lacks: said, not crashed
+    press(v, "t")
+    assert v.technique == "tetra" and "only technique" in v.messages[-1]
+    press(v, KEY_MINUS)
+    assert "takes no step" in v.messages[-1] and v.render_arguments()[2] is None
+    press(v, "p")
+    assert "tetra has no preintegrate option" in v.messages[-1]
+    press(v, "l")                                      # composite cannot be shaded: refused
+    assert not v.shading and "cannot switch shading" in v.messages[-1]
+    for number in range(1, len(v.presets()) + 1):       # every preset, or a message
+        press(v, str(number))
+        v.refine()
+    press(v, "1")
+    assert v.tf.key() == data.synthetic_tf().key()
+    v.refine()
+    assert v.last_frame.quality == "full"
+
+
+def test_mesh_sort_key_elsewhere(open_viewer):
+    v = head_viewer(open_viewer)
+    press(v, "c")
+    assert "raycast has no sort option" in v.messages[-1] and "sort" not in v.render_arguments()[3]
+
+
+def test_mesh_progressive_refinement(mesh_viewer):
+    v = mesh_viewer()
+    clock = [0.0]
+    v.clock = lambda: clock[0]
+    v.refine()
+    v.on_mouse_button(MOUSE_LEFT, PRESS, 0, 80, 40)
+    for k in range(2):                                  # dragging: half resolution, still no step
+        v.on_cursor(84 + 4 * k, 40)
+        clock[0] += 0.03
+        v.frame()
+        assert v.last_frame.quality == "coarse" and v.last_frame.target_size == (80, 60)
+        assert v.last_frame.step is None
+    v.on_mouse_button(MOUSE_LEFT, RELEASE, 0)
+    clock[0] += 0.5
+    assert v.needs_frame()
+    v.frame()
+    assert v.last_frame.quality == "full" and v.last_frame.target_size == (160, 120) and not v.needs_frame()
+
+
+def test_mesh_double_click_recentres(mesh_viewer):
+    v = mesh_viewer()
+    clock = [100.0]
+    v.clock = lambda: clock[0]
+    o = v.orbit
+    lo, hi = v.volume.bounds
+    forward, distance = -o.back.copy(), o.distance
+    origin, direction = o.ray(80, 40, 160, 120)
+    for _ in range(2):
+        v.on_mouse_button(MOUSE_LEFT, PRESS, 0, 80, 40)
+        v.on_mouse_button(MOUSE_LEFT, RELEASE, 0)
+        clock[0] += 0.1
+    # on the ray under the cursor, inside the ball, at the torus in front of the centre
+    assert np.linalg.norm(np.cross(o.target - origin, direction)) < 1e-6
+    assert np.all(o.target >= lo - 1e-9) and np.all(o.target <= hi + 1e-9)
+    assert np.linalg.norm(o.target - (lo + hi) / 2) > 5.0
+    assert np.allclose(o.back, -forward) and o.distance == distance
+    clock[0] += 1.0
+    for _ in range(2):                                  # on empty space: the centre
+        v.on_mouse_button(MOUSE_LEFT, PRESS, 0, 2, 2)
+        v.on_mouse_button(MOUSE_LEFT, RELEASE, 0)
+        clock[0] += 0.1
+    assert np.allclose(o.target, (lo + hi) / 2)
+
+
+def test_mesh_picking_follows_the_cells():
+    """No window: the ray's cells tile the chord through the (convex) ball without gaps,
+    the field is continuous from cell to cell, and each mode picks by the grid's rule."""
+    mesh, tf = data.delaunay_ball(), data.synthetic_tf()
+    centre = (mesh.bounds[0] + mesh.bounds[1]) / 2
+    origin = centre + np.array([3.0, -2.0, 100.0])
+    direction = np.array([0.01, 0.02, -1.0])
+    direction /= np.linalg.norm(direction)
+    t_in, t_out, start, rate = viewer_mod.ray_cells(mesh, origin, direction)
+    assert t_in.size > 10 and np.all(np.diff(t_in) >= 0)
+    assert np.allclose(t_out[:-1], t_in[1:], atol=1e-6)          # no gaps, no overlaps
+    end_values = start + rate * (t_out - t_in)
+    assert np.allclose(end_values[:-1], start[1:], atol=1e-6)    # the field is continuous
+    # the entry and exit lie on the ball's hull (radius 31.5 about its centre, roughly)
+    for t in (t_in[0], t_out[-1]):
+        assert 29.0 < np.linalg.norm(origin + t * direction - centre) < 31.6
+    # mip: the largest value along the ray; isosurface: the first crossing of the iso value
+    t = np.linspace(t_in[0], t_out[-1], 20001)
+    k = np.clip(np.searchsorted(t_in, t, side="right") - 1, 0, None)
+    field = start[k] + rate[k] * (t - t_in[k])
+    p = viewer_mod.pick_point(mesh, tf, "mip", None, origin, direction)
+    assert abs((p - origin) @ direction - t[np.argmax(field)]) < 0.5
+    iso = 0.5 * (field.min() + field.max())
+    assert field[0] < iso
+    p = viewer_mod.pick_point(mesh, tf, "isosurface", iso, origin, direction)
+    first = t[np.argmax(field >= iso)]
+    assert abs((p - origin) @ direction - first) < 0.5
+    p = viewer_mod.pick_point(mesh, tf, "composite", None, origin, direction)
+    assert p is not None and np.linalg.norm(np.cross(p - origin, direction)) < 1e-6
+    # a ray that misses the ball, and one through the box's corner outside the ball
+    assert viewer_mod.pick_point(mesh, tf, "composite", None, origin + [200.0, 0, 0], direction) is None
+    corner = mesh.bounds[1] - 0.5
+    assert viewer_mod.pick_point(mesh, tf, "composite", None, corner + [0, 0, 100.0],
+                                 np.array([0.0, 0.0, -1.0])) is None
+
+
+def test_mesh_file_through_the_command_line(open_viewer, tmp_path):
+    """``dvr-gl view ball.npz``: the viewer takes what the command line loads (when the
+    command line reads mesh files)."""
+    if not hasattr(cli, "input_is_mesh"):
+        pytest.skip("the command line does not read mesh files yet")
+    mesh = data.delaunay_ball()
+    path = tmp_path / "ball.npz"
+    np.savez(path, points=mesh.points, tets=mesh.tets, value=mesh.scalars)
+    v = open_viewer(str(path), "--tf", "synthetic", "--size", SIZE, "--screenshot", str(tmp_path / "shot.png"))
+    assert v.technique == "tetra" and isinstance(v.volume, dvr_gl.TetMesh)
+    press(v, "c")
+    v.refine()
+    press(v, "s")
+    assert png(tmp_path / "shot.png")[..., 3].max() > 100
