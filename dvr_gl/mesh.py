@@ -9,6 +9,8 @@ relative to the mesh's lower corner, ``n`` pointing out of its first cell. A cel
 planes are its faces' planes, negated where the cell is the face's second one: the two
 cells of a shared face hold exactly opposite planes, so a ray leaves one at exactly the
 distance at which it enters the other (no crack, no overlap, in any precision).
+A folded mesh (both cells of a face on the same side of it) is the exception: there the
+second cell takes the plane unnegated, so every cell is bounded by its own four faces.
 
 Visibility order (Williams 1992, MPVO). For a face shared by cells a and b, the cell on
 the eye's side of the face's plane is in front of the other and must be drawn after it.
@@ -123,6 +125,11 @@ def _build_topology(mesh):
     normal[~ok] = 0.0
     offsets = np.einsum("ij,ij->i", normal, tri.mean(axis=1))
     sign = np.where(cell_of.reshape(M, 4) == face_cells[tet_faces, 0], 1.0, -1.0)
+    # A folded mesh (curvilinear grids have them) puts both cells of a face on the same
+    # side of it; the second cell's plane must then point the same way as the first's,
+    # or the cell's four planes bound nothing. The cell's own opposite vertex decides.
+    inside = np.einsum("mkj,mkj->mk", normal[tet_faces], p) - offsets[tet_faces]
+    sign = np.where(sign * inside > 0, -sign, sign)
     s = mesh.scalars[tets]
     convex, hull_points = _convex_hull(pts, np.abs(vol6).sum() / 6.0)
     on_hull = np.zeros(F, bool)
