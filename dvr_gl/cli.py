@@ -245,6 +245,11 @@ def _check_input_kind(args, mesh):
     if not mesh and technique in MESH_TECHNIQUES:
         raise UsageError("--technique", f"{technique} renders tetrahedral meshes, but {args.input} is a "
                                         f"grid volume; use --technique {', '.join(GRID_TECHNIQUES[:-1])} or {GRID_TECHNIQUES[-1]}")
+    _check_input_options(args, mesh)
+
+
+def _check_input_options(args, mesh):
+    """--scalars only for meshes, the raw-volume options only for grids."""
     if not mesh and getattr(args, "scalars", None) is not None:
         raise UsageError("--scalars", f"chooses a mesh's point array; {args.input} is a grid volume")
     if mesh:
@@ -366,13 +371,7 @@ def cmd_info_file(args, out=None):
         except dvr_io.InputError as e:
             raise UsageError("--dtype", e.detail) from None
     mesh = input_is_mesh(args)
-    if not mesh and args.scalars is not None:
-        raise UsageError("--scalars", f"chooses a mesh's point array; {args.input} is a grid volume")
-    if mesh:
-        for attr, option in _VOLUME_OPTIONS:
-            value = getattr(args, attr, None)
-            if value is not None and value is not False:
-                raise UsageError(option, f"is for grid volumes, not the mesh {args.input}")
+    _check_input_options(args, mesh)
     data, _ = _load_input(args)
     if mesh:
         arrays = dvr_io.point_arrays(args.input)

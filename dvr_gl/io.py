@@ -159,8 +159,8 @@ def _parse_dtype(dtype, name="dtype"):
 
 # ----------------------------------------------------------------------------- loading
 
-def load_volume(path, shape=None, dtype=None, spacing=None, origin=None, mask_nonfinite=False) -> Volume:
-    """Read a volume file (see the module docstring for formats); returns a Volume."""
+def _existing_file(path, kind):
+    """``path`` as a string, if it names an existing file (``kind``: for the message)."""
     try:
         path = os.fspath(path)
     except TypeError:
@@ -168,7 +168,13 @@ def load_volume(path, shape=None, dtype=None, spacing=None, origin=None, mask_no
     if not os.path.exists(path):
         raise MissingFileError("path", f"no such file {path!r}")
     if os.path.isdir(path):
-        raise InputError("path", f"{path!r} is a directory, not a volume file")
+        raise InputError("path", f"{path!r} is a directory, not a {kind} file")
+    return path
+
+
+def load_volume(path, shape=None, dtype=None, spacing=None, origin=None, mask_nonfinite=False) -> Volume:
+    """Read a volume file (see the module docstring for formats); returns a Volume."""
+    path = _existing_file(path, "volume")
     if spacing is not None:
         spacing = _triplet(spacing, "spacing", positive=True)
     if origin is not None:
@@ -612,15 +618,7 @@ _LOW_DIMENSIONAL_PREFIXES = ("vertex", "line", "triangle", "quad", "polygon")
 
 
 def _mesh_path(path):
-    try:
-        path = os.fspath(path)
-    except TypeError:
-        raise InputError("path", f"expected a file name, got {path!r}") from None
-    if not os.path.exists(path):
-        raise MissingFileError("path", f"no such file {path!r}")
-    if os.path.isdir(path):
-        raise InputError("path", f"{path!r} is a directory, not a mesh file")
-    return path
+    return _existing_file(path, "mesh")
 
 
 def _meshio_extensions():

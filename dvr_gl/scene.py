@@ -156,6 +156,17 @@ class Volume:
                 f"origin={tuple(self.origin.tolist())}, range={self.data_range})")
 
 
+def _mesh_points(points):
+    """(N, 3) finite float64 points, N >= 4, or an error naming the bad one."""
+    pts = _array("points", points, np.float64)
+    if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) < 4:
+        raise ValueError(f"points must have shape (N, 3) with N >= 4, got shape {pts.shape}")
+    if not np.all(np.isfinite(pts)):
+        bad = int(np.argwhere(~np.isfinite(pts))[0, 0])
+        raise ValueError(f"points must be finite, point {bad} is {tuple(pts[bad].tolist())}")
+    return pts
+
+
 class TetMesh:
     """An unstructured tetrahedral mesh with one scalar per point.
 
@@ -173,12 +184,7 @@ class TetMesh:
     """
 
     def __init__(self, points, tets, scalars):
-        pts = _array("points", points, np.float64)
-        if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) < 4:
-            raise ValueError(f"points must have shape (N, 3) with N >= 4, got shape {pts.shape}")
-        if not np.all(np.isfinite(pts)):
-            bad = int(np.argwhere(~np.isfinite(pts))[0, 0])
-            raise ValueError(f"points must be finite, point {bad} is {tuple(pts[bad].tolist())}")
+        pts = _mesh_points(points)
         raw = np.asarray(tets)
         if raw.dtype.kind not in "iu":
             raise TypeError(f"tets must be integer indices, got dtype {raw.dtype}")
@@ -213,12 +219,7 @@ class TetMesh:
         input point is a vertex). Slivers Qhull leaves on the hull are kept: zero-volume
         cells are harmless."""
         from scipy.spatial import Delaunay
-        pts = _array("points", points, np.float64)
-        if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) < 4:
-            raise ValueError(f"points must have shape (N, 3) with N >= 4, got shape {pts.shape}")
-        if not np.all(np.isfinite(pts)):
-            bad = int(np.argwhere(~np.isfinite(pts))[0, 0])
-            raise ValueError(f"points must be finite, point {bad} is {tuple(pts[bad].tolist())}")
+        pts = _mesh_points(points)
         try:
             tri = Delaunay(pts, qhull_options="Qbb Qc Qz Q12")
         except Exception as e:  # Qhull raises its own error type for flat input

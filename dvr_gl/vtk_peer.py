@@ -134,6 +134,16 @@ _vtk = None
 _KEPT_WINDOWS = []
 
 
+
+def _color_function(v, tf):
+    """VTK's colour transfer function of ``tf`` (RGB, clamped like dvr_gl's)."""
+    ctf = v.vtkColorTransferFunction()
+    ctf.SetColorSpaceToRGB()
+    ctf.ClampingOn()
+    for s, r, g, b in tf.color_points:
+        ctf.AddRGBPoint(float(s), float(r), float(g), float(b))
+    return ctf
+
 class _KeepCurrentContext:
     """Puts back the EGL context that was current before VTK made its own current, so
     that a moderngl context used in the same thread (the dvr_gl Renderer, test fixtures)
@@ -297,11 +307,7 @@ class VTKPeer:
             return
         v = self._v
         tf = scene.tf
-        ctf = v.vtkColorTransferFunction()
-        ctf.SetColorSpaceToRGB()
-        ctf.ClampingOn()
-        for s, r, g, b in tf.color_points:
-            ctf.AddRGBPoint(float(s), float(r), float(g), float(b))
+        ctf = _color_function(v, tf)
         otf = v.vtkPiecewiseFunction()
         otf.ClampingOn()
         if scene.mode in ("isosurface", "average"):
@@ -435,11 +441,7 @@ class VTKPeer:
         if key == self._pt_key:
             return
         v = self._v
-        ctf = v.vtkColorTransferFunction()
-        ctf.SetColorSpaceToRGB()
-        ctf.ClampingOn()
-        for s, r, g, b in tf.color_points:
-            ctf.AddRGBPoint(float(s), float(r), float(g), float(b))
+        ctf = _color_function(v, tf)
         otf = v.vtkPiecewiseFunction()
         otf.ClampingOn()
         if native_opacity:

@@ -15,33 +15,7 @@ import numpy as np
 
 from .common import blend_over
 from .linear_segment import linear_segment
-from .mesh_rays import ray_tet_segments
-
-
-def covered_once(seg):
-    """Per pixel, drop the part of each segment that an earlier segment (by start)
-    already covers; returns the kept segments with their clipped start and value there."""
-    order = np.lexsort((seg["t0"], seg["pixel"]))
-    pix, cell = seg["pixel"][order], seg["tet"][order]
-    t0, t1, s0, s1 = (seg[k][order] for k in ("t0", "t1", "s0", "s1"))
-    # running maximum of the ends so far, per pixel (a segmented scan by doubling)
-    reach = t1.copy()
-    step = 1
-    while step < reach.size:
-        same = pix[step:] == pix[:-step]
-        if not same.any():
-            break
-        reach[step:] = np.where(same, np.maximum(reach[step:], reach[:-step]), reach[step:])
-        step *= 2
-    before = np.full(reach.size, -np.inf)
-    if reach.size > 1:
-        before[1:] = np.where(pix[1:] == pix[:-1], reach[:-1], -np.inf)
-    start = np.maximum(t0, before)
-    keep = t1 > start
-    with np.errstate(divide="ignore", invalid="ignore"):
-        frac = np.where(t1 > t0, (start - t0) / (t1 - t0), 0.0)
-    s_start = s0 + (s1 - s0) * frac
-    return dict(pixel=pix[keep], tet=cell[keep], t0=start[keep], t1=t1[keep], s0=s_start[keep], s1=s1[keep])
+from .mesh_rays import ray_tet_segments, union_segments
 
 
 def render_plan(plan, lut_exact=False):
@@ -52,7 +26,7 @@ def render_plan(plan, lut_exact=False):
     out = np.zeros((H * W, 4))
     if plan.draw.size == 0:
         return out.reshape(H, W, 4)
-    seg = covered_once(ray_tet_segments(scene, tets=plan.draw))
+    seg = union_segments(ray_tet_segments(scene, tets=plan.draw))
     if scene.mode != "composite":
         return _reduce(scene, seg, out).reshape(H, W, 4)
     rank = np.full(len(scene.volume.tets), -1, np.int64)
