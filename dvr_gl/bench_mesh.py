@@ -15,6 +15,10 @@ Per data set and renderer:
 - RMSE, largest error and PSNR against ``reference.exact`` at ``--error-size`` (default
   128), with the same camera.
 
+Per data set also: the time of Shirley and Tuchman's classification of the visible cells
+in NumPy (``dvr_gl.shirley_tuchman``), the CPU alternative to the per-fragment clipping
+that ``tetra`` does on the GPU (printed after the table, in the JSON info).
+
 Renderers: dvr_gl ``tetra`` with ``sort="mpvo"`` and with ``sort="centroid"``, and VTK's
 projected tetrahedra (its default cell-centre depth sort); VTK is left out when it is
 not installed. ``t/VTK`` and ``err/VTK`` divide by VTK's row of the same data set.
@@ -102,6 +106,22 @@ def _time_dvr_gl(gl, scene, sort, repeats, on_frame):
     return image, plan, statistics.median(sorts), statistics.median(draws), totals
 
 
+def _time_cpu_classification(scene, repeats=3):
+    """Median seconds of Shirley-Tuchman's classification of the visible cells in NumPy
+    (``dvr_gl.shirley_tuchman``): the CPU alternative to tetra's per-fragment clipping."""
+    from . import shirley_tuchman
+    from .mesh import topology, visible_cells
+    mesh = scene.volume
+    cells = visible_cells(mesh, scene.tf)
+    cells = cells[~topology(mesh).flat[cells]]
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        shirley_tuchman.classify(mesh, cells, scene)
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times)
+
+
 def _current(gl):
     from .gl.context import current
     return current(gl.ctx)
@@ -127,8 +147,8 @@ def run_mesh(args, err=sys.stderr):
     if peer is not None:
         renderers.append(("VTK projected tetrahedra", "vtk"))
     frames = 1 + args.repeats
-    progress = Progress(len(names) * (2 + len(renderers) * (frames + 1)), stream=err)
-    rows, info = [], {}
+    progress = Progress(len(names) * (3 + len(renderers) * (frames + 1)), stream=err)
+    rows, info = [], {"cpu_classify_ms": {}}
     try:
         with dvr_gl.Renderer(backend=args.backend) as gl:
             info["dvr_gl"] = gl.info()
@@ -145,6 +165,8 @@ def run_mesh(args, err=sys.stderr):
                 progress.begin(f"{name}: exact image")
                 exact = exact_image(small)
                 progress.advance(f"{name}: exact image")
+                info["cpu_classify_ms"][name] = 1e3 * _time_cpu_classification(scene)
+                progress.advance(f"{name}: CPU classification")
                 for label, sort in renderers:
                     tick = lambda: progress.advance(f"{name}: {label}")   # noqa: E731
                     if sort == "vtk":
@@ -230,6 +252,9 @@ def run_mesh_bench(args) -> int:
           f"(a new view each frame, median of {info['repeats']}); error at {info['error_size']}x{info['error_size']} "
           "against reference.exact")
     print(format_mesh_table(rows))
+    if info["cpu_classify_ms"]:
+        print("Shirley-Tuchman classification on the CPU (NumPy; tetra clips per fragment instead), ms per view: "
+              + ", ".join(f"{k} {v:.0f}" for k, v in info["cpu_classify_ms"].items()))
     if args.out:
         paths = write_results(rows, info, args.out, fields=CSV_FIELDS, figure=figure_png)
         print("wrote " + ", ".join(str(p) for p in paths))
