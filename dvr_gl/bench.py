@@ -225,8 +225,9 @@ def _add_ratios(rows):
             r["rmse_vs_vtk"] = r["rmse"] / ref["rmse"] if ref["rmse"] > 0 else None
 
 
-def run(args, err=sys.stderr):
+def run(args, err=None):
     """Run the benchmark; returns (rows, info)."""
+    err = err if err is not None else sys.stderr   # looked up now: tests swap sys.stderr
     import dvr_gl
     # The function, imported from its module: ``dvr_gl.reference.exact`` the attribute
     # can be shadowed by the submodule of the same name once that has been imported.
@@ -313,11 +314,12 @@ def slicing_configs(interpolate=SLICE_INTERPOLATE):
     return out
 
 
-def run_slicing(args, err=sys.stderr):
+def run_slicing(args, err=None):
     """Frame time and error against exact of the slicing techniques beside the ray caster
     at equal sample distance, on the same data sets and cameras as the peer suite.
     Returns (rows, info); rows carry ``time_vs_raycast`` and ``rmse_vs_raycast`` (the
     post-classified ray caster at the same distance)."""
+    err = err if err is not None else sys.stderr   # looked up now: tests swap sys.stderr
     import dvr_gl
     from .reference.exact import exact as exact_image
     from .techniques.slice2d import stack_axis
