@@ -348,3 +348,26 @@ def test_grid_and_its_tetrahedralisation_agree_within_interpolation():
                                       - dvr_gl.reference.exact(g)) ** 2)))
     assert diffs[0] > 1e-4
     assert 2.8 < diffs[0] / diffs[1] < 5.5 and 2.8 < diffs[1] / diffs[2] < 5.5, diffs
+
+
+@pytest.mark.parametrize("height", [1e-3, 1e-6])
+def test_slivers_glued_to_a_cube(renderer, height):
+    """Nearly flat cells (height 1e-3 and 1e-6 of the cube) glued to the cube's bottom
+    face, seen from above, from below and grazing along the face (the eye in its plane,
+    where a sliver's planes are nearly parallel to the rays): GL within its bound of the
+    exact image, so no sliver turns into a long segment."""
+    base = cube_mesh(SIX)
+    apex = [[0.6, 0.3, -height], [0.3, 0.6, -height]]
+    pts = np.vstack([base.points, apex])
+    bottom = [t for t in SIX if sum(CUBE[i][2] == 0 for i in t) == 3]   # the cells on z = 0
+    faces = [[i for i in t if CUBE[i][2] == 0] for t in bottom]
+    tets = np.vstack([base.tets, [faces[0] + [8]], [faces[1] + [9]]])
+    mesh = TetMesh(pts, tets, np.full(len(pts), 0.5))
+    assert len(faces) == 2 and M.topology(mesh).flat.sum() == 0
+    for cam in (Camera((0.5, 0.5, 3.0), (0.5, 0.5, 0.5), fov=40),
+                Camera((0.7, 0.2, -2.5), (0.5, 0.5, 0.5), fov=40),
+                Camera((-2.0, -1.5, 0.0), (0.5, 0.5, 0.0), up=(0, 0, 1), fov=50)):
+        scene = Scene(mesh, TF, cam, 40, 40)
+        img = renderer.render(scene, technique="tetra")
+        assert np.abs(img - dvr_gl.reference.exact(scene)).max() < GL_TOL
+        assert img[..., 3].max() > 0.2
