@@ -139,12 +139,17 @@ def add_render_options(r):
                         "{\"color\": [[s, r, g, b], ...], \"opacity\": [[s, a], ...], \"unit_distance\": u}; "
                         "default: auto (the data set's own for builtin inputs)")
     r.add_argument("--technique", default=None,
-                   help="rendering technique: raycast, slice2d or slice3d for volumes, tetra for meshes "
-                        "(default: raycast, or tetra for a mesh)")
+                   help="rendering technique: raycast, slice2d or slice3d for volumes, tetra for meshes, "
+                        "particles for both (default: raycast, or tetra for a mesh)")
     r.add_argument("--scalars", metavar="NAME",
                    help="mesh inputs: the point array to render (default: the first scalar array)")
     r.add_argument("--sort", choices=SORTS,
                    help="tetra: cell order, exact per pixel (mpvo) or by centroid distance (default: mpvo)")
+    r.add_argument("--repetitions", type=_count, metavar="R",
+                   help="particles: independent particle sets averaged (default: 1)")
+    r.add_argument("--seed", type=_count, metavar="N", help="particles: random seed (default: 0)")
+    r.add_argument("--radius", type=_positive, metavar="W",
+                   help="particles: particle radius in world units (default: half a pixel at the data)")
     r.add_argument("--step", type=_positive, metavar="S",
                    help="sampling step (slice distance for slice3d) in world units (default: half "
                         "the smallest spacing; slice2d takes none, see --interpolate; tetra none)")
@@ -188,7 +193,8 @@ def add_render_options(r):
 
 # which technique takes which option
 TECHNIQUE_OPTIONS = {"interpolate": ("slice2d",), "proxy": ("slice3d",), "shells": ("slice3d",),
-                     "preintegrate": ("raycast", "slice2d", "slice3d"), "sort": ("tetra",)}
+                     "preintegrate": ("raycast", "slice2d", "slice3d"), "sort": ("tetra",),
+                     "repetitions": ("particles",), "seed": ("particles",), "radius": ("particles",)}
 
 #: the techniques that render meshes (cell projection); the others render grid volumes
 MESH_TECHNIQUES = ("tetra",)
@@ -219,7 +225,8 @@ def technique_options(args):
         args.technique = MESH_TECHNIQUES[0] if mesh else "raycast"
     _check_input_kind(args, mesh)
     kwargs = {"technique": args.technique}
-    for name in ("step", "preintegrate", "interpolate", "proxy", "shells", "sort", "target"):
+    for name in ("step", "preintegrate", "interpolate", "proxy", "shells", "sort", "repetitions", "seed",
+                 "radius", "target"):
         value = getattr(args, name, None)
         if value is None or value is False:
             continue
@@ -232,6 +239,8 @@ def technique_options(args):
                                        "(spacing / (interpolate + 1)); use --interpolate K")
         if name == "step" and args.technique in MESH_TECHNIQUES:
             raise UsageError("--step", f"{args.technique} integrates each cell exactly and takes no step")
+        if name == "step" and args.technique == "particles":
+            raise UsageError("--step", "particles takes no step (the particles' density follows the TF)")
         kwargs[name] = value
     return kwargs
 

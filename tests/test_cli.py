@@ -469,3 +469,29 @@ def test_mesh_bench_quick_run(tmp_path, capsys):
     doc = json.load(open(tmp_path / "m.json"))
     assert doc["info"]["cpu_classify_ms"]["ball"] > 0 and len(doc["rows"]) == 3
     assert (tmp_path / "m.png").stat().st_size > 0
+
+
+def test_render_particles_on_a_grid_and_a_mesh(renderer, tiny, tiny_mesh, capsys):
+    """--technique particles takes both kinds of input, with --repetitions, --seed and
+    --radius; the PNG is what the library renders; other techniques' options are refused."""
+    d, _ = tiny
+    vol = load_volume(d / "tiny.npy")
+    out = d / "particles.png"
+    argv = ["--technique", "particles", "--repetitions", "3", "--seed", "2", "--size", "24x24", "--out", out]
+    code, stdout, err = _run(["render", d / "tiny.npy"] + argv, capsys)
+    assert code == 0, err
+    assert "particles" in stdout
+    scene = dvr_gl.Scene(vol, auto_preset(vol), dvr_gl.default_camera(vol), 24, 24)
+    assert np.array_equal(_png(out)[1], to_png_array(renderer.render(scene, technique="particles",
+                                                                     repetitions=3, seed=2)))
+    dm, mesh = tiny_mesh
+    code, _, err = _run(["render", dm / "tiny.vtu", "--radius", "0.05"] + argv, capsys)
+    assert code == 0, err
+    assert _png(out)[1][..., 3].max() > 0
+    for extra, message in ((["--sort", "mpvo"], "--sort: applies to --technique tetra only, not particles"),
+                           (["--step", "1"], "--step: particles takes no step"),
+                           (["--mode", "mip"], "particles renders mode 'composite', got mode 'mip'")):
+        code, _, err = _run(["render", d / "tiny.npy"] + argv + extra, capsys)
+        assert code == 2 and message in err, err
+    code, _, err = _run(["render", d / "tiny.npy", "--repetitions", "2", "--out", out], capsys)
+    assert code == 2 and "--repetitions: applies to --technique particles only, not raycast" in err

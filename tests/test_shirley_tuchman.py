@@ -10,7 +10,7 @@ from scipy.spatial import ConvexHull, QhullError
 
 from dvr_gl import Camera, Scene, TetMesh, TransferFunction
 from dvr_gl.shirley_tuchman import classify, project
-from dvr_gl.techniques import tetra
+from dvr_gl.techniques.common import data_projection
 
 CUBE = np.array([[x, y, z] for z in (0, 1) for y in (0, 1) for x in (0, 1)], float)
 SIX = np.array([[0, 1, 3, 7], [0, 1, 5, 7], [0, 2, 3, 7], [0, 2, 6, 7], [0, 4, 5, 7], [0, 4, 6, 7]])
@@ -138,7 +138,7 @@ def test_pixel_convention_matches_camera_rays_and_gl_projection():
         assert t[0] == pytest.approx(2.5)
         # the GL path's matrix (row vectors) puts mesh-relative points at the same pixels
         pts = mesh.points - mesh.bounds[0]
-        clip_ = np.c_[pts, np.ones(len(pts))] @ tetra.projection(scene)
+        clip_ = np.c_[pts, np.ones(len(pts))] @ data_projection(scene)
         ndc = clip_[:, :2] / clip_[:, 3:]
         gl_xy = np.c_[(ndc[:, 0] + 1) * scene.width / 2, (1 - ndc[:, 1]) * scene.height / 2]
         np.testing.assert_allclose(project(pts, scene)[0], gl_xy, atol=1e-9)

@@ -2,14 +2,15 @@
 plan the GL path and the NumPy reference share), ``draw(renderer, plan)`` (renders into
 ``renderer.target(...)`` and returns that framebuffer), ``MODES`` (the scene modes it
 renders), ``TAKES_STEP`` (whether ``step`` is an option) and ``DATA`` ("volume" for grids,
-"mesh" for TetMesh scenes); the reference of the same name lives in ``dvr_gl.reference``."""
+"mesh" for TetMesh scenes, or a tuple of both); the reference of the same name lives in ``dvr_gl.reference``."""
 
 from __future__ import annotations
 
 import importlib
 
 _MODULES = {"raycast": "dvr_gl.techniques.raycast", "slice2d": "dvr_gl.techniques.slice2d",
-            "slice3d": "dvr_gl.techniques.slice3d", "tetra": "dvr_gl.techniques.tetra"}
+            "slice3d": "dvr_gl.techniques.slice3d", "tetra": "dvr_gl.techniques.tetra",
+            "particles": "dvr_gl.techniques.particles"}
 
 
 def names():
@@ -20,7 +21,11 @@ def for_scene(scene):
     """The names of the techniques that can render ``scene`` (its data and its mode)."""
     kind = "mesh" if scene.is_mesh else "volume"
     return tuple(n for n in _MODULES
-                 if scene.mode in get_technique(n).MODES and get_technique(n).DATA == kind)
+                 if scene.mode in get_technique(n).MODES and kind in _kinds(get_technique(n).DATA))
+
+
+def _kinds(data):
+    return (data,) if isinstance(data, str) else tuple(data)
 
 
 def get_technique(name):

@@ -14,14 +14,17 @@ TARGETS = {"rgba32f": "f4", "rgba16f": "f2", "rgba8": "f1"}
 
 
 def check_scene(scene, technique, modes=None, data="volume"):
-    """The scene is a Scene of the data kind the technique renders ("volume": a grid,
-    "mesh": a TetMesh) in one of its modes."""
+    """The scene is a Scene of a data kind the technique renders (``data``: "volume" for a
+    grid, "mesh" for a TetMesh, or a tuple of both) in one of its modes."""
     if not isinstance(scene, Scene):
         raise TypeError(f"scene must be a dvr_gl.Scene, got {type(scene).__name__}")
-    if data == "volume" and scene.is_mesh:
-        raise ValueError(f"{technique} renders a Volume (a grid); this scene holds a TetMesh: use technique 'tetra'")
-    if data == "mesh" and not scene.is_mesh:
-        raise ValueError(f"{technique} renders a TetMesh; this scene holds a Volume: use raycast, slice2d or slice3d")
+    kinds = (data,) if isinstance(data, str) else tuple(data)      # a technique may take both
+    if scene.is_mesh and "mesh" not in kinds:
+        raise ValueError(f"{technique} renders a Volume (a grid); this scene holds a TetMesh: "
+                         "use technique 'tetra' or 'particles'")
+    if not scene.is_mesh and "volume" not in kinds:
+        raise ValueError(f"{technique} renders a TetMesh; this scene holds a Volume: "
+                         "use raycast, slice2d, slice3d or particles")
     if modes is not None and scene.mode not in modes:
         raise ValueError(f"{technique} renders mode {' or '.join(repr(m) for m in modes)}, "
                          f"got mode {scene.mode!r}")
@@ -127,6 +130,33 @@ def eye_view_projection(scene, near, far):
                                                            dtype=np.float64)
     view = pyrr.matrix44.create_look_at(eye, eye + cam.forward, cam.true_up, dtype=np.float64)
     return view @ proj
+
+
+def knot_uniforms(prog, knots, capacity):
+    """The transfer function's knots (a SegmentKnots) as the uniform arrays of
+    shaders/common/linear_segment.glsl, padded to the program's KNOT_CAPACITY."""
+    rows = knots.texture_rows()
+    for name, row in (("u_knot_color", rows[0]), ("u_knot_opacity", rows[1])):
+        padded = np.zeros((capacity, 4), np.float32)
+        padded[:len(row)] = row
+        if name in prog:
+            prog[name].write(padded.tobytes())
+
+
+def data_projection(scene):
+    """View-projection of positions relative to the data's lower corner, for techniques
+    that draw without a depth test or with their own depths: near just in front of the
+    eye (perspective) or at the rays' start plane (orthographic), far behind every
+    point of the data's bounding box."""
+    cam = scene.camera
+    lo, _ = scene.volume.bounds
+    extent = scene.volume.extent
+    corners = np.array([[x, y, z] for z in (0, 1) for y in (0, 1) for x in (0, 1)]) * extent
+    depth = (corners - (cam.eye - lo)) @ cam.forward
+    diag = float(np.linalg.norm(extent)) or 1.0
+    far = max(float(depth.max()), 0.0) * 1.01 + 1e-3 * diag
+    near = 0.0 if cam.is_ortho else 1e-6 * diag
+    return eye_view_projection(scene, near, far)
 
 
 def box_depth_range(scene):

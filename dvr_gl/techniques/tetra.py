@@ -45,7 +45,7 @@ from ..cache import TableCache
 from ..mesh import LOCAL_FACES, Order, centroid_order, mpvo_order, topology, visible_cells
 from ..reference.linear_segment import SegmentKnots
 from ..scene import Scene
-from .common import TARGETS, bind, camera_uniforms, check_scene, check_target, eye_view_projection
+from .common import TARGETS, bind, camera_uniforms, check_scene, check_target, data_projection, knot_uniforms
 
 MODES = ("composite", "mip", "minip", "average")
 TAKES_STEP = False
@@ -204,30 +204,6 @@ class _OrderTexture:
             self.tex.release()
 
 
-def projection(scene):
-    """View-projection of mesh-relative positions. No depth test is used, so near and far
-    only clip: near just in front of the eye (perspective) or at the rays' start plane
-    (orthographic), far behind every point."""
-    mesh = scene.volume
-    cam = scene.camera
-    corners = np.array([[x, y, z] for z in (0, 1) for y in (0, 1) for x in (0, 1)]) * mesh.extent
-    depth = (corners - (cam.eye - mesh.bounds[0])) @ cam.forward
-    diag = float(np.linalg.norm(mesh.extent)) or 1.0
-    far = max(float(depth.max()), 0.0) * 1.01 + 1e-3 * diag
-    near = 0.0 if cam.is_ortho else 1e-6 * diag
-    return eye_view_projection(scene, near, far)
-
-
-def _knot_uniforms(prog, plan):
-    rows = plan.knots.texture_rows()
-    capacity = plan.defines["KNOT_CAPACITY"]
-    for name, row in (("u_knot_color", rows[0]), ("u_knot_opacity", rows[1])):
-        padded = np.zeros((capacity, 4), np.float32)
-        padded[:len(row)] = row
-        if name in prog:
-            prog[name].write(padded.tobytes())
-
-
 def draw(renderer, plan):
     """Render the plan into the renderer's target; returns that framebuffer."""
     ctx = renderer.ctx
@@ -253,8 +229,8 @@ def draw(renderer, plan):
     uniforms = {**camera_uniforms(scene), "u_knot_count": plan.knots.count,
                 "u_inv_unit": plan.knots.inv_unit}
     bind(prog, textures, uniforms)
-    _knot_uniforms(prog, plan)
-    prog["u_view_proj"].write(projection(scene).astype("f4").tobytes())
+    knot_uniforms(prog, plan.knots, plan.defines["KNOT_CAPACITY"])
+    prog["u_view_proj"].write(data_projection(scene).astype("f4").tobytes())
     vao = renderer.resource("tetra_faces", make=lambda: _FaceIndices(ctx), capacity=1).vao(prog, plan.draw.size)
     ctx.disable(ctx.DEPTH_TEST)
     ctx.enable(ctx.BLEND | ctx.CULL_FACE)
@@ -274,7 +250,7 @@ def draw(renderer, plan):
                                           if k in ("KNOT_CAPACITY", "MODE_MINIP", "MODE_AVERAGE")})
         fbo.use()
         bind(classify, {"t_reduced": reduced.color_attachments[0]}, {"u_knot_count": plan.knots.count})
-        _knot_uniforms(classify, plan)
+        knot_uniforms(classify, plan.knots, plan.defines["KNOT_CAPACITY"])
         renderer.empty_vao(classify).render(ctx.TRIANGLES, vertices=3)
     return fbo
 

@@ -1,0 +1,199 @@
+"""Particle-based volume rendering (PBVR; Sakamoto and Koyamada 2007, Kawamura et al.
+2010 for tetrahedra): the field becomes opaque spheres whose density follows the
+transfer function's extinction (``dvr_gl.particles`` derives it), and GL draws them with
+a depth test only: no visibility order and no blending. The first sphere each pixel's
+ray meets gives the pixel its colour; averaged over ``repetitions`` independent particle
+sets, the image converges to the emission-absorption integral (noise falling like
+``1 / sqrt(repetitions)``).
+
+Particles are made on the CPU (vectorised NumPy) once per data set, transfer function,
+radius, seed and repetition count, and reused for every view: turning the camera makes
+none. Grids (per cell) and tetrahedral meshes (per tetrahedron) alike.
+
+Options (same names in ``dvr_gl.reference.render``)
+---------------------------------------------------
+repetitions : int >= 1 (default 1), independent particle sets averaged.
+seed : int (default 0); set k draws from ``numpy.random.default_rng([seed, k])``.
+radius : world units (default: half a pixel at the data's centre, ``particles.default_radius``).
+    The particle count grows as 1 / radius^2, the bias as radius^2.
+sampler : "rejection" (Poisson candidates per cell thinned by tau(s) / tau_max: exact).
+target : "rgba32f" (default) | "rgba16f" | "rgba8": the averaged image's target.
+
+Particles are drawn as point sprites; a particle whose centre lies outside the view's
+clip volume is not drawn (GL clips points by their centre).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .. import particles as pbvr
+from ..cache import TableCache
+from ..reference.linear_segment import SegmentKnots
+from ..scene import Scene
+from .common import TARGETS, bind, camera_uniforms, check_scene, check_target, data_projection, knot_uniforms
+from .tetra import knot_capacity
+
+MODES = ("composite",)
+TAKES_STEP = False
+DATA = ("volume", "mesh")
+
+
+@dataclass
+class ParticlesPlan:
+    scene: Scene
+    knots: SegmentKnots
+    sets: list                      # ParticleSet per repetition
+    radius: float
+    repetitions: int = 1
+    seed: int = 0
+    sampler: str = "rejection"
+    target: str = "rgba32f"
+    defines: dict = field(default_factory=dict)
+    generate_seconds: float = 0.0   # spent making particles for this plan (0 when cached)
+
+    @property
+    def count(self):
+        return sum(s.count for s in self.sets)
+
+
+def _check_int(name, value, lowest):
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < lowest:
+        raise ValueError(f"{name} must be an integer >= {lowest}, got {value!r}")
+    return int(value)
+
+
+def make_plan(scene, step=None, *, repetitions=1, seed=0, radius=None, sampler="rejection",
+              target="rgba32f", tables=None):
+    """Validate the options and get the particle sets (made once per data, TF, radius,
+    seed, repetitions and sampler; ``tables`` keeps them between frames)."""
+    tables = tables or TableCache()
+    check_scene(scene, "particles", MODES, data=DATA)
+    if step is not None:
+        raise ValueError(f"particles takes no step (the particles' density follows the TF), got step={step!r}")
+    repetitions = _check_int("repetitions", repetitions, 1)
+    seed = _check_int("seed", seed, 0)
+    if sampler not in pbvr.SAMPLERS:
+        raise ValueError(f"sampler must be one of {', '.join(pbvr.SAMPLERS)}, got {sampler!r}")
+    if radius is None:
+        radius = pbvr.default_radius(scene)
+    elif isinstance(radius, bool) or not isinstance(radius, (int, float)) or not (math.isfinite(radius) and radius > 0):
+        raise ValueError(f"radius must be a positive number (world units), got {radius!r}")
+    radius = float(radius)
+    check_target(target)
+    data, tf = scene.volume, scene.tf
+    knots = tables.get("segment_knots", tf, make=SegmentKnots)
+    timing = {}
+
+    def make(data, tf):
+        t0 = time.perf_counter()
+        sets = [pbvr.generate(data, tf, radius, seed, k, sampler) for k in range(repetitions)]
+        timing["generate"] = time.perf_counter() - t0
+        return sets
+
+    sets = tables.get(f"particles:{radius!r}:{seed}:{repetitions}:{sampler}", data, tf, make=make)
+    defines = {"KNOT_CAPACITY": knot_capacity(knots.count)}
+    if scene.camera.is_ortho:
+        defines["ORTHO"] = 1
+    return ParticlesPlan(scene=scene, knots=knots, sets=sets, radius=radius, repetitions=repetitions,
+                         seed=seed, sampler=sampler, target=target, defines=defines,
+                         generate_seconds=timing.get("generate", 0.0))
+
+
+def far_distance(scene):
+    """A distance along any pixel ray beyond every point of the data's bounding box."""
+    lo, hi = scene.volume.bounds
+    corners = np.array([[a, b, c] for a in (lo[0], hi[0]) for b in (lo[1], hi[1]) for c in (lo[2], hi[2])])
+    cam = scene.camera
+    if cam.is_ortho:
+        return float(((corners - cam.eye) @ cam.forward).max()) + 1e-3 * float(np.linalg.norm(hi - lo)) + 1e-30
+    return float(np.linalg.norm(corners - cam.eye, axis=1).max()) * 1.01 + 1e-30
+
+
+def pixels_per_unit(scene):
+    """Pixels per world unit at unit depth (perspective) or anywhere (orthographic)."""
+    return scene.height / (2.0 * scene.camera.screen_scale(scene.width, scene.height)[1])
+
+
+def draw(renderer, plan):
+    """Render the plan into the renderer's target; returns that framebuffer."""
+    ctx = renderer.ctx
+    scene = plan.scene
+    fbo = renderer.target(scene.width, scene.height, TARGETS[plan.target])
+    fbo.use()
+    fbo.clear(0.0, 0.0, 0.0, 0.0)
+    if plan.count == 0:
+        return fbo
+    scratch = renderer.resource("particles_scratch", make=lambda: _DepthTarget(ctx), capacity=1).get(
+        scene.width, scene.height)
+    prog = renderer.programs.get("particles/particles.vert", "particles/particles.frag", plan.defines)
+    average = renderer.programs.get("tetra/fullscreen.vert", "particles/average.frag")
+    uniforms = {**camera_uniforms(scene), "u_radius": plan.radius, "u_pixels_per_unit": pixels_per_unit(scene),
+                "u_inv_far": 1.0 / far_distance(scene), "u_knot_count": plan.knots.count,
+                "u_inv_unit": plan.knots.inv_unit}
+    bind(prog, {}, uniforms)
+    knot_uniforms(prog, plan.knots, plan.defines["KNOT_CAPACITY"])
+    prog["u_view_proj"].write(data_projection(scene).astype("f4").tobytes())
+    ctx.enable(ctx.PROGRAM_POINT_SIZE)
+    for particle_set in plan.sets:
+        if particle_set.count == 0:
+            continue
+        vao = renderer.resource("particles_vbo", particle_set, prog, make=lambda s=particle_set: _Points(ctx, prog, s),
+                                capacity=max(plan.repetitions, 2)).vao
+        scratch.use()
+        scratch.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+        ctx.enable(ctx.DEPTH_TEST)
+        ctx.depth_func = "<"
+        vao.render(ctx.POINTS)
+        ctx.disable(ctx.DEPTH_TEST)
+        fbo.use()
+        ctx.enable(ctx.BLEND)
+        ctx.blend_func = ctx.ONE, ctx.ONE
+        ctx.blend_equation = ctx.FUNC_ADD
+        bind(average, {"t_image": scratch.color_attachments[0]}, {"u_weight": 1.0 / plan.repetitions})
+        renderer.empty_vao(average).render(ctx.TRIANGLES, vertices=3)
+        ctx.disable(ctx.BLEND)
+    ctx.disable(ctx.PROGRAM_POINT_SIZE)
+    return fbo
+
+
+class _Points:
+    """One particle set on the GPU: (x, y, z, scalar) float32 per particle."""
+
+    def __init__(self, ctx, prog, particle_set):
+        data = np.concatenate([particle_set.points, particle_set.scalars[:, None]], axis=1).astype(np.float32)
+        self.vbo = ctx.buffer(np.ascontiguousarray(data).tobytes())
+        self.vao = ctx.vertex_array(prog, [(self.vbo, "4f", "a_particle")])
+
+    def release(self):
+        self.vao.release()
+        self.vbo.release()
+
+
+class _DepthTarget:
+    """An RGBA32F colour and float depth framebuffer for one repetition, kept per size."""
+
+    def __init__(self, ctx):
+        self.ctx = ctx
+        self.size = None
+        self.fbo = None
+
+    def get(self, width, height):
+        if self.size != (width, height):
+            self.release()
+            self.fbo = self.ctx.framebuffer([self.ctx.texture((width, height), 4, dtype="f4")],
+                                            self.ctx.depth_texture((width, height)))
+            self.size = (width, height)
+        return self.fbo
+
+    def release(self):
+        if self.fbo is not None:
+            for tex in self.fbo.color_attachments:
+                tex.release()
+            self.fbo.depth_attachment.release()
+            self.fbo.release()
+            self.fbo = None

@@ -1,0 +1,37 @@
+// The pixel's ray against the particle's sphere (NumPy twin: reference/particles.py):
+// kept where it passes within the radius, at the distance where it enters the sphere
+// (0 for an eye inside it), which the depth test compares. The colour is the transfer
+// function's at the particle's scalar, from its knots (exact), and opaque.
+#version 330 core
+
+#ifndef ORTHO
+#define ORTHO 0
+#endif
+
+#include "common/camera_ray.glsl"
+#include "common/linear_segment.glsl"
+
+flat in vec3 v_center;
+flat in float v_scalar;
+
+uniform float u_radius;
+uniform float u_inv_far;       // 1 / a distance beyond every particle: depth in [0, 1]
+
+out vec4 frag_color;
+
+void main() {
+    vec3 origin, dir;
+    pixelRay(origin, dir);
+    vec3 v = v_center - origin;
+    float t = dot(v, dir);
+    vec3 off = v - t * dir;
+    float miss = u_radius * u_radius - dot(off, off);
+    if (miss < 0.0) discard;
+    float half_chord = sqrt(miss);
+    if (t + half_chord <= 0.0) discard;       // the sphere is behind the ray's start
+    gl_FragDepth = clamp(max(t - half_chord, 0.0) * u_inv_far, 0.0, 1.0);
+    vec3 color;
+    float alpha, transparency;
+    knotLine(knotsBelow(v_scalar, false) - 1, v_scalar, color, alpha, transparency);
+    frag_color = vec4(color, 1.0);
+}
