@@ -150,6 +150,8 @@ def add_render_options(r):
     r.add_argument("--seed", type=_count, metavar="N", help="particles: random seed (default: 0)")
     r.add_argument("--radius", type=_positive, metavar="W",
                    help="particles: particle radius in world units (default: half a pixel at the data)")
+    r.add_argument("--sampler", choices=("rejection", "uniform", "metropolis"),
+                   help="particles: placement in each cell (default: rejection, unbiased)")
     r.add_argument("--step", type=_positive, metavar="S",
                    help="sampling step (slice distance for slice3d) in world units (default: half "
                         "the smallest spacing; slice2d takes none, see --interpolate; tetra none)")
@@ -194,7 +196,8 @@ def add_render_options(r):
 # which technique takes which option
 TECHNIQUE_OPTIONS = {"interpolate": ("slice2d",), "proxy": ("slice3d",), "shells": ("slice3d",),
                      "preintegrate": ("raycast", "slice2d", "slice3d"), "sort": ("tetra",),
-                     "repetitions": ("particles",), "seed": ("particles",), "radius": ("particles",)}
+                     "repetitions": ("particles",), "seed": ("particles",), "radius": ("particles",),
+                     "sampler": ("particles",)}
 
 #: the techniques that render meshes (cell projection); the others render grid volumes
 MESH_TECHNIQUES = ("tetra",)
@@ -226,7 +229,7 @@ def technique_options(args):
     _check_input_kind(args, mesh)
     kwargs = {"technique": args.technique}
     for name in ("step", "preintegrate", "interpolate", "proxy", "shells", "sort", "repetitions", "seed",
-                 "radius", "target"):
+                 "radius", "sampler", "target"):
         value = getattr(args, name, None)
         if value is None or value is False:
             continue

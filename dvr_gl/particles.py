@@ -26,6 +26,14 @@ with probability ``tau(s) / tau_max``. Thinning a Poisson process this way gives
 the Poisson process of intensity ``tau(s(x)) / A``: no bias from the sampler. Cells
 whose range has zero opacity make no candidates.
 
+The classic samplers are there to compare with: ``"uniform"`` draws a Poisson number of
+particles with mean ``tau`` averaged over the cell's corners times ``V / A`` and places
+them uniformly; ``"metropolis"`` takes the same count and moves each particle by an
+independence Metropolis chain inside its cell (``METROPOLIS_STEPS`` uniform proposals,
+accepted with ``min(1, tau' / tau)``), so positions follow ``tau`` within the cell. Both
+are biased where ``tau`` is not linear over a cell (the corner average is not the cell's
+integral); the README reports by how much.
+
 Opacity 1 is infinite extinction; it is capped at ``alpha = 1 - 1e-6`` (``TAU_CAP``), a
 transmittance of 1e-6 per unit distance.
 """
@@ -37,7 +45,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-SAMPLERS = ("rejection",)
+SAMPLERS = ("rejection", "uniform", "metropolis")
+METROPOLIS_STEPS = 16          # independence-sampler steps per particle
 ALPHA_CAP = 1.0 - 1e-6          # opacity 1 would need infinitely many particles
 MAX_PARTICLES = 50_000_000      # per set: beyond this the radius is too small for memory
 _CELL_CHUNK = 1 << 18           # cells processed at a time
@@ -87,13 +96,6 @@ def default_radius(scene):
     return float(f"{half_height * distance / scene.height:.6g}")
 
 
-def expected_count(data, tf, radius):
-    """Mean number of particles per set: integral of tau over the domain / (pi r^2),
-    bounded above by the thinning's candidate count."""
-    lo, hi, volume, _ = _cells(data)
-    return float((max_extinction(tf, lo, hi) * volume).sum() / (math.pi * radius ** 2))
-
-
 def generate(data, tf, radius, seed=0, repetition=0, sampler="rejection"):
     """One particle set for a Volume or a TetMesh, reproducible from (seed, repetition)."""
     if sampler not in SAMPLERS:
@@ -101,33 +103,64 @@ def generate(data, tf, radius, seed=0, repetition=0, sampler="rejection"):
     if not (isinstance(radius, (int, float)) and math.isfinite(radius) and radius > 0):
         raise ValueError(f"radius must be a positive number (world units), got {radius!r}")
     rng = np.random.default_rng([int(seed), int(repetition)])
-    lo, hi, volume, place = _cells(data)
+    cells = _cells(data)
     area = math.pi * radius ** 2
-    tau_max = max_extinction(tf, lo, hi)
-    emitting = np.flatnonzero((tau_max > 0) & (volume > 0))
-    mean = tau_max[emitting] * volume[emitting] / area
+    tau_max = max_extinction(tf, cells.lo, cells.hi)
+    emitting = np.flatnonzero((tau_max > 0) & (cells.volume > 0))
+    if sampler == "rejection":
+        mean = tau_max[emitting] * cells.volume[emitting] / area
+    else:                       # the classic estimate: tau at the corners, averaged
+        mean = np.concatenate([extinction(tf, cells.corners(emitting[i:i + _CELL_CHUNK])).mean(axis=1)
+                               for i in range(0, emitting.size, _CELL_CHUNK)] or [np.zeros(0)])
+        mean = mean * cells.volume[emitting] / area
     if mean.sum() > MAX_PARTICLES:
         raise ValueError(f"radius={radius!r} needs about {mean.sum():.3g} particle candidates per set "
                          f"(at most {MAX_PARTICLES:,}): use a larger radius or a smaller image")
     points, scalars, candidates = [], [], 0
     for start in range(0, emitting.size, _CELL_CHUNK):
-        cells = emitting[start:start + _CELL_CHUNK]
-        n = rng.poisson(mean[start:start + _CELL_CHUNK])
-        owner = np.repeat(cells, n)
+        owner = np.repeat(emitting[start:start + _CELL_CHUNK], rng.poisson(mean[start:start + _CELL_CHUNK]))
         candidates += owner.size
-        p, s = place(owner, rng)
-        keep = rng.random(owner.size) * tau_max[owner] < extinction(tf, s)
-        points.append(p[keep].astype(np.float32))
-        scalars.append(s[keep].astype(np.float32))
+        p, s = cells.place(owner, rng)
+        if sampler == "rejection":
+            keep = rng.random(owner.size) * tau_max[owner] < extinction(tf, s)
+            p, s = p[keep], s[keep]
+        elif sampler == "metropolis":
+            p, s = _metropolis(cells, owner, p, s, tf, rng)
+        points.append(p.astype(np.float32))
+        scalars.append(s.astype(np.float32))
     if not points:
         points, scalars = [np.zeros((0, 3), np.float32)], [np.zeros(0, np.float32)]
     return ParticleSet(np.concatenate(points), np.concatenate(scalars), candidates, int(emitting.size))
 
 
+def _metropolis(cells, owner, p, s, tf, rng):
+    """Each particle's position moved by an independence Metropolis chain inside its cell
+    (uniform proposals, accepted with min(1, tau' / tau)): after the steps its
+    distribution approaches tau(s(x)) within the cell."""
+    tau = extinction(tf, s)
+    for _ in range(METROPOLIS_STEPS):
+        q, t = cells.place(owner, rng)
+        tau_q = extinction(tf, t)
+        accept = rng.random(owner.size) * tau <= tau_q
+        p = np.where(accept[:, None], q, p)
+        s = np.where(accept, t, s)
+        tau = np.where(accept, tau_q, tau)
+    return p, s
+
+
+@dataclass
+class _Cells:
+    """Per cell (grid cell or tetrahedron): scalar min and max, volume; ``place(cells,
+    rng)`` draws one uniform point in each listed cell (relative to the data's lower
+    corner) with the field there; ``corners(cells)`` gives their corner values."""
+    lo: np.ndarray
+    hi: np.ndarray
+    volume: np.ndarray
+    place: object
+    corners: object
+
+
 def _cells(data):
-    """(scalar min, scalar max, volume, place) per cell; ``place(cells, rng)`` draws one
-    uniform point in each listed cell and returns (points relative to the lower corner,
-    the field there)."""
     if hasattr(data, "tets"):
         return _tet_cells(data)
     return _grid_cells(data)
@@ -156,7 +189,12 @@ def _grid_cells(vol):
         s = (c00 * (1 - fy) + c10 * fy) * (1 - fz) + (c01 * (1 - fy) + c11 * fy) * fz
         p = (np.stack([i, j, k], axis=1) + f) * vol.spacing
         return p, s
-    return lo, hi, volume, place
+
+    def corners(cells):
+        k, rem = np.divmod(cells, ny * nx)
+        j, i = np.divmod(rem, nx)
+        return np.stack([v[k + dz, j + dy, i + dx] for dz in (0, 1) for dy in (0, 1) for dx in (0, 1)], axis=1)
+    return _Cells(lo, hi, volume, place, corners)
 
 
 def _tet_cells(mesh):
@@ -172,4 +210,4 @@ def _tet_cells(mesh):
         p = np.einsum("nk,nkj->nj", w, pts[mesh.tets[cells]])
         s = np.einsum("nk,nk->n", w, vals[cells])
         return p, s
-    return vals.min(axis=1), vals.max(axis=1), volume, place
+    return _Cells(vals.min(axis=1), vals.max(axis=1), volume, place, lambda cells: vals[cells])

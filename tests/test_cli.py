@@ -485,7 +485,7 @@ def test_render_particles_on_a_grid_and_a_mesh(renderer, tiny, tiny_mesh, capsys
     assert np.array_equal(_png(out)[1], to_png_array(renderer.render(scene, technique="particles",
                                                                      repetitions=3, seed=2)))
     dm, mesh = tiny_mesh
-    code, _, err = _run(["render", dm / "tiny.vtu", "--radius", "0.05"] + argv, capsys)
+    code, _, err = _run(["render", dm / "tiny.vtu", "--radius", "0.05", "--sampler", "metropolis"] + argv, capsys)
     assert code == 0, err
     assert _png(out)[1][..., 3].max() > 0
     for extra, message in ((["--sort", "mpvo"], "--sort: applies to --technique tetra only, not particles"),
