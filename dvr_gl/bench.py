@@ -604,14 +604,18 @@ def add_arguments(parser):
     parser.add_argument("--no-vtk", action="store_true", help="leave VTK out")
     parser.add_argument("--textures", action="store_true",
                         help="also measure trilinear sampling throughput of float32, float16 and unorm8 textures")
-    parser.add_argument("--suite", choices=("peer", "slicing", "mesh"), default="peer",
+    parser.add_argument("--suite", choices=("peer", "slicing", "mesh", "particles"), default="peer",
                         help="peer: the ray caster beside VTK (default); slicing: slice2d (k = 0, 1, 3), "
                              "slice3d (cpu and vertex proxies) and the ray caster at equal sample "
                              "distance, each with and without pre-integration; mesh: projected "
                              "tetrahedra (MPVO and centroid sort) beside VTK's on the NASA meshes "
-                             "and the Delaunay ball (--datasets bluntfin,combustor,loxpost,ball)")
+                             "and the Delaunay ball (--datasets bluntfin,combustor,loxpost,ball); particles: "
+                             "PBVR at several repetition counts beside raycast (head) and tetra (bluntfin)")
+    parser.add_argument("--repetitions-list", default="1,4,16,64",
+                        help="particles suite: the repetition counts (default 1,4,16,64)")
     parser.add_argument("--error-size", type=int, default=None,
-                        help="mesh suite: image size of the error measurement (default 128; 32 with --quick)")
+                        help="mesh and particles suites: image size of the error measurement (default 128; "
+                             "32 with --quick)")
     parser.add_argument("--data-dir", default=None,
                         help=f"mesh suite: the shared data folder (default $DVR_GL_DATA or {DEFAULT_DATA_DIR})")
     parser.add_argument("--vtk-float", action="store_true",
@@ -636,7 +640,18 @@ def run_bench(args) -> int:
         print(f"dvr-gl bench: --steps must be positive, got {args.steps!r}", file=sys.stderr)
         return 2
     if args.datasets is None:
-        args.datasets = "bluntfin,combustor,loxpost,ball" if args.suite == "mesh" else "chest,head"
+        args.datasets = {"mesh": "bluntfin,combustor,loxpost,ball", "particles": "head,bluntfin"}.get(
+            args.suite, "chest,head")
+    if args.suite == "particles":
+        from .bench_particles import parse_repetitions, run_particles_bench
+        if args.error_size is None:
+            args.error_size = 32 if args.quick else 128
+        try:
+            args.repetitions_list = parse_repetitions(args.repetitions_list)
+        except ValueError as e:
+            print(f"dvr-gl bench: {e}", file=sys.stderr)
+            return 2
+        return run_particles_bench(args)
     if args.suite == "mesh":
         from .bench_mesh import run_mesh_bench
         if args.error_size is None:

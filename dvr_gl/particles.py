@@ -55,9 +55,11 @@ _CELL_CHUNK = 1 << 18           # cells processed at a time
 @dataclass
 class ParticleSet:
     """One independent set: ``points`` (N, 3) float32 relative to the data's lower corner,
-    ``scalars`` (N,) float32, and how many candidates were drawn to make them."""
+    ``scalars`` (N,) float32, ``colors`` (N, 3) float32 (the exact TF's at each scalar,
+    made with the set: a set belongs to one TF), and how many candidates were drawn."""
     points: np.ndarray
     scalars: np.ndarray
+    colors: np.ndarray
     candidates: int
     cells: int                   # cells that can emit (non-zero opacity in their range)
 
@@ -130,7 +132,9 @@ def generate(data, tf, radius, seed=0, repetition=0, sampler="rejection"):
         scalars.append(s.astype(np.float32))
     if not points:
         points, scalars = [np.zeros((0, 3), np.float32)], [np.zeros(0, np.float32)]
-    return ParticleSet(np.concatenate(points), np.concatenate(scalars), candidates, int(emitting.size))
+    scalars = np.concatenate(scalars)
+    colors = tf.color(scalars.astype(np.float64)).reshape(-1, 3).astype(np.float32)
+    return ParticleSet(np.concatenate(points), scalars, colors, candidates, int(emitting.size))
 
 
 def _metropolis(cells, owner, p, s, tf, rng):

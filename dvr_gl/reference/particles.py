@@ -1,6 +1,7 @@
 """NumPy reference of particle-based volume rendering: the plan's particle sets, each
 pixel-centre ray against every sphere near it (float64), the nearest entry kept (the
-depth test), its colour from the exact transfer function, opaque; the sets averaged.
+depth test), its colour (the exact TF's, stored with the particle), opaque; the sets
+averaged.
 
 As GL does with points, a particle whose centre lies outside the view's clip volume
 (``data_projection``: beside the image, behind the near plane or beyond far) is not
@@ -19,16 +20,16 @@ _PAIRS = 1 << 21     # (particle, pixel) candidates per batch
 
 def render_plan(plan, lut_exact=False):
     """(H, W, 4) float64 premultiplied RGBA, row 0 on top. ``lut_exact`` is accepted for
-    the common interface: the colour is the exact TF's anyway."""
+    the common interface: the particles carry the exact TF's colour anyway."""
     scene = plan.scene
     W, H = scene.width, scene.height
     out = np.zeros((H * W, 4))
     for particle_set in plan.sets:
-        out += first_hits(scene, plan.radius, particle_set.points, particle_set.scalars)
+        out += first_hits(scene, plan.radius, particle_set.points, particle_set.colors)
     return (out / plan.repetitions).reshape(H, W, 4)
 
 
-def first_hits(scene, radius, points, scalars):
+def first_hits(scene, radius, points, colors):
     """(H * W, 4): per pixel the colour (alpha 1) of the first sphere its ray enters, or 0."""
     W, H = scene.width, scene.height
     cam = scene.camera
@@ -37,7 +38,7 @@ def first_hits(scene, radius, points, scalars):
     clip = np.concatenate([p, np.ones((len(p), 1))], axis=1) @ data_projection(scene)
     w = clip[:, 3]
     inside = np.all(np.abs(clip[:, :3]) <= w[:, None], axis=1) & (w > 0)
-    p, s, clip = p[inside], np.asarray(scalars, np.float64)[inside], clip[inside]
+    p, colors, clip = p[inside], np.asarray(colors, np.float64)[inside], clip[inside]
     # projected centre in pixels (x right, row down) and a square sure to hold the disc
     cx = (clip[:, 0] / clip[:, 3] + 1) * 0.5 * W
     cy = (1 - clip[:, 1] / clip[:, 3]) * 0.5 * H
@@ -82,6 +83,6 @@ def first_hits(scene, radius, points, scalars):
         start = stop
     out = np.zeros((W * H, 4))
     hit = owner >= 0
-    out[hit, :3] = scene.tf.color(s[owner[hit]])
+    out[hit, :3] = colors[owner[hit]]
     out[hit, 3] = 1.0
     return out

@@ -33,10 +33,8 @@ import numpy as np
 
 from .. import particles as pbvr
 from ..cache import TableCache
-from ..reference.linear_segment import SegmentKnots
 from ..scene import Scene
-from .common import TARGETS, bind, camera_uniforms, check_scene, check_target, data_projection, knot_uniforms
-from .tetra import knot_capacity
+from .common import TARGETS, bind, camera_uniforms, check_scene, check_target, data_projection
 
 MODES = ("composite",)
 TAKES_STEP = False
@@ -46,7 +44,6 @@ DATA = ("volume", "mesh")
 @dataclass
 class ParticlesPlan:
     scene: Scene
-    knots: SegmentKnots
     sets: list                      # ParticleSet per repetition
     radius: float
     repetitions: int = 1
@@ -86,7 +83,6 @@ def make_plan(scene, step=None, *, repetitions=1, seed=0, radius=None, sampler="
     radius = float(radius)
     check_target(target)
     data, tf = scene.volume, scene.tf
-    knots = tables.get("segment_knots", tf, make=SegmentKnots)
     timing = {}
 
     def make(data, tf):
@@ -96,10 +92,8 @@ def make_plan(scene, step=None, *, repetitions=1, seed=0, radius=None, sampler="
         return sets
 
     sets = tables.get(f"particles:{radius!r}:{seed}:{repetitions}:{sampler}", data, tf, make=make)
-    defines = {"KNOT_CAPACITY": knot_capacity(knots.count)}
-    if scene.camera.is_ortho:
-        defines["ORTHO"] = 1
-    return ParticlesPlan(scene=scene, knots=knots, sets=sets, radius=radius, repetitions=repetitions,
+    defines = {"ORTHO": 1} if scene.camera.is_ortho else {}
+    return ParticlesPlan(scene=scene, sets=sets, radius=radius, repetitions=repetitions,
                          seed=seed, sampler=sampler, target=target, defines=defines,
                          generate_seconds=timing.get("generate", 0.0))
 
@@ -133,10 +127,8 @@ def draw(renderer, plan):
     prog = renderer.programs.get("particles/particles.vert", "particles/particles.frag", plan.defines)
     average = renderer.programs.get("tetra/fullscreen.vert", "particles/average.frag")
     uniforms = {**camera_uniforms(scene), "u_radius": plan.radius, "u_pixels_per_unit": pixels_per_unit(scene),
-                "u_inv_far": 1.0 / far_distance(scene), "u_knot_count": plan.knots.count,
-                "u_inv_unit": plan.knots.inv_unit}
+                "u_inv_far": 1.0 / far_distance(scene)}
     bind(prog, {}, uniforms)
-    knot_uniforms(prog, plan.knots, plan.defines["KNOT_CAPACITY"])
     prog["u_view_proj"].write(data_projection(scene).astype("f4").tobytes())
     ctx.enable(ctx.PROGRAM_POINT_SIZE)
     for particle_set in plan.sets:
@@ -162,12 +154,12 @@ def draw(renderer, plan):
 
 
 class _Points:
-    """One particle set on the GPU: (x, y, z, scalar) float32 per particle."""
+    """One particle set on the GPU: position and colour, 6 float32 per particle."""
 
     def __init__(self, ctx, prog, particle_set):
-        data = np.concatenate([particle_set.points, particle_set.scalars[:, None]], axis=1).astype(np.float32)
+        data = np.concatenate([particle_set.points, particle_set.colors], axis=1).astype(np.float32)
         self.vbo = ctx.buffer(np.ascontiguousarray(data).tobytes())
-        self.vao = ctx.vertex_array(prog, [(self.vbo, "4f", "a_particle")])
+        self.vao = ctx.vertex_array(prog, [(self.vbo, "3f 3f", "a_position", "a_color")])
 
     def release(self):
         self.vao.release()

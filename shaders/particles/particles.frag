@@ -1,7 +1,7 @@
 // The pixel's ray against the particle's sphere (NumPy twin: reference/particles.py):
 // kept where it passes within the radius, at the distance where it enters the sphere
-// (0 for an eye inside it), which the depth test compares. The colour is the transfer
-// function's at the particle's scalar, from its knots (exact), and opaque.
+// (0 for an eye inside it), which the depth test compares. The colour (the transfer
+// function's at the particle) is opaque.
 #version 330 core
 
 #ifndef ORTHO
@@ -9,10 +9,9 @@
 #endif
 
 #include "common/camera_ray.glsl"
-#include "common/linear_segment.glsl"
 
 flat in vec3 v_center;
-flat in float v_scalar;
+flat in vec3 v_color;
 
 uniform float u_radius;
 uniform float u_inv_far;       // 1 / a distance beyond every particle: depth in [0, 1]
@@ -30,8 +29,5 @@ void main() {
     float half_chord = sqrt(miss);
     if (t + half_chord <= 0.0) discard;       // the sphere is behind the ray's start
     gl_FragDepth = clamp(max(t - half_chord, 0.0) * u_inv_far, 0.0, 1.0);
-    vec3 color;
-    float alpha, transparency;
-    knotLine(knotsBelow(v_scalar, false) - 1, v_scalar, color, alpha, transparency);
-    frag_color = vec4(color, 1.0);
+    frag_color = vec4(v_color, 1.0);
 }
