@@ -495,3 +495,21 @@ def test_render_particles_on_a_grid_and_a_mesh(renderer, tiny, tiny_mesh, capsys
         assert code == 2 and message in err, err
     code, _, err = _run(["render", d / "tiny.npy", "--repetitions", "2", "--out", out], capsys)
     assert code == 2 and "--repetitions: applies to --technique particles only, not raycast" in err
+
+
+def test_particles_bench_quick_run(tmp_path, capsys):
+    """`dvr-gl bench --suite particles` end to end on the CT head (64x64): a row per R and
+    the ray caster's, the slope printed, results written."""
+    from dvr_gl import bench
+    parser = argparse.ArgumentParser()
+    bench.add_arguments(parser)
+    args = parser.parse_args(["--suite", "particles", "--quick", "--datasets", "head", "--repetitions-list", "1,4",
+                              "--out", str(tmp_path / "p")])
+    assert bench.run_bench(args) == 0
+    out = capsys.readouterr().out
+    assert "head: RMSE falls with R at a log-log slope of" in out
+    rows = list(csv.DictReader(open(tmp_path / "p.csv")))
+    assert [r["repetitions"] for r in rows] == ["1", "4", ""] and rows[-1]["renderer"] == "dvr_gl raycast"
+    assert float(rows[1]["rmse"]) < float(rows[0]["rmse"]) and int(rows[0]["particles"]) > 0
+    bad = parser.parse_args(["--suite", "particles", "--repetitions-list", "0,4"])
+    assert bench.run_bench(bad) == 2
