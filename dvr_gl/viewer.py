@@ -358,14 +358,15 @@ class TechniqueInfo:
 
 def _renders_data_of(name, volume):
     """Whether technique ``name`` is for this kind of data (its module's ``DATA``:
-    "volume" for grids, "mesh" for TetMesh), whatever else it may refuse."""
+    "volume" for grids, "mesh" for TetMesh, or both), whatever else it may refuse."""
     from .techniques import get_technique
 
     try:
-        kind = getattr(get_technique(name), "DATA", "volume")
+        data = getattr(get_technique(name), "DATA", "volume")
     except Exception:
         return False
-    return kind == ("mesh" if _is_mesh(volume) else "volume")
+    kinds = (data,) if isinstance(data, str) else tuple(data)
+    return ("mesh" if _is_mesh(volume) else "volume") in kinds
 
 
 def _plan_params(make_plan):
@@ -467,6 +468,8 @@ class FrameInfo:
     step: float | None
     seconds: float               # render + present, GL finished
     key: tuple = field(default=(), repr=False)
+    render_key: tuple = field(default=(), repr=False)
+    accumulated: int = 1         # particle sets averaged (particles only)
 
 
 class Viewer:
@@ -475,6 +478,7 @@ class Viewer:
     with :meth:`run` or :meth:`frame` and the ``on_*`` handlers, end with :meth:`close`."""
 
     settle_s = 0.2        # no input for this long: render at full quality
+    max_accumulate = 64   # particles: sets averaged at most while the view stays still
     coarse_scale = 0.5    # resolution while interacting
     coarse_step = 2.0     # step multiplier while interacting
     double_click_s = 0.35
@@ -506,6 +510,7 @@ class Viewer:
         self.background = self.backgrounds[0]
         self._values = None                # float32 samples for picking, made on first use
         self._version = 0                  # bumped by every change of the picture
+        self.accumulated = 1               # particle sets averaged in the picture shown
         self._overlay_version = 0
         self._uploaded_overlay = None
         self._last_input = -math.inf
@@ -704,7 +709,15 @@ class Viewer:
         step = self.effective_step()
         if step is not None and coarse:
             step *= self.coarse_step
-        return self._scene(width, height), self.technique, step, self._options()
+        options = self._options()
+        if self._accumulates():
+            options["repetitions"] = 1 if coarse else self.accumulated
+        return self._scene(width, height), self.technique, step, options
+
+    def _accumulates(self):
+        """Whether the technique averages independent sets (particles) and the user left
+        their number to the viewer: it then grows while the view stays still."""
+        return self.info.accepts("repetitions") and self.info.params is not None and "repetitions" not in self.options
 
     def _validate(self):
         """Raise if the current state cannot be rendered (make_plan on a tiny scene)."""
@@ -741,6 +754,7 @@ class Viewer:
 
     def _changed(self, interactive=False):
         self._version += 1
+        self.accumulated = 1
         if interactive:
             self._last_input = self.clock()
 
@@ -1094,6 +1108,11 @@ class Viewer:
         last = self.last_frame
         if last is None or last.key[2:] != (self._version, self._overlay_version, self.background):
             return True
+        if last.quality == "full" and self.quality() == "full" and self._accumulates() \
+                and last.accumulated == self.accumulated < self.max_accumulate:
+            # still: average twice as many particle sets (progressive refinement)
+            self.accumulated = min(2 * self.accumulated, self.max_accumulate)
+            return True
         return last.quality == "coarse" and self.quality() == "full"
 
     def frame(self, quality=None, force=False, grab=False):
@@ -1105,8 +1124,8 @@ class Viewer:
             return None
         scale = self.coarse_scale if quality == "coarse" else 1.0
         tw, th = max(1, round(fw * scale)), max(1, round(fh * scale))
-        key = (quality, (tw, th, fw, fh), self._version)
-        render = force or self._fbo is None or self.last_frame is None or self.last_frame.key[:3] != key
+        key = (quality, (tw, th, fw, fh), self._version, self.accumulated)
+        render = force or self._fbo is None or self.last_frame is None or self.last_frame.render_key != key
         t0 = time.perf_counter()
         ctx = self.ctx
         with self._gl():
@@ -1145,7 +1164,8 @@ class Viewer:
         self.last_frame = FrameInfo(q, (tw, th), (fw, fh), step, seconds if render else
                                     (self.last_frame.seconds if self.last_frame else seconds),
                                     key=(q, (tw, th, fw, fh), self._version, self._overlay_version,
-                                         self.background))
+                                         self.background), render_key=key,
+                                    accumulated=self.accumulated if q == "full" else 1)
         self._update_title()
         return pixels
 
@@ -1182,6 +1202,8 @@ class Viewer:
             extras.append(str(self._options().get("sort", "mpvo")))
         if self.shading:
             extras.append("shaded")
+        if self._accumulates():
+            extras.append(f"{f.accumulated} sets")
         mode = self.mode + (f" {self.iso:g}" if self.mode == "isosurface" else "")
         title = (f"{PROG}: {self.settings.input_name} ({describe_data(self.volume)}) | {self.technique} {mode}"
                  + (f" ({', '.join(extras)})" if extras else "")

@@ -155,7 +155,11 @@ def assert_matches_headless(v, renderer, image8):
 def _grid_techniques():
     """The techniques for grid volumes (the head); tetra (DATA "mesh") has its own tests."""
     from dvr_gl.techniques import get_technique
-    return [n for n in technique_names() if getattr(get_technique(n), "DATA", "volume") == "volume"]
+
+    def kinds(n):
+        data = getattr(get_technique(n), "DATA", "volume")
+        return (data,) if isinstance(data, str) else data
+    return [n for n in technique_names() if "volume" in kinds(n)]
 
 
 @pytest.mark.parametrize("technique", _grid_techniques())
@@ -593,6 +597,38 @@ def test_progressive_refinement(open_viewer, renderer, tmp_path):
     assert v.last_frame.step == full_step and not v.needs_frame()
     press(v, "s")
     assert_matches_headless(v, renderer, png(tmp_path / "r.png"))
+
+
+def test_particles_accumulate_while_still(open_viewer, renderer, tmp_path):
+    """particles: the first full frame averages one set; while the view stays still each
+    further frame averages twice as many, up to max_accumulate; any change starts again;
+    a --repetitions given by the user is kept as it is."""
+    v = head_viewer(open_viewer, "--technique", "particles", "--screenshot", str(tmp_path / "p.png"))
+    v.max_accumulate = 8
+    clock = [0.0]
+    v.clock = lambda: clock[0]
+    v.frame()
+    assert v.last_frame.quality == "full" and v.last_frame.accumulated == 1
+    seen = []
+    while v.needs_frame():
+        v.frame()
+        seen.append(v.last_frame.accumulated)
+    assert seen == [2, 4, 8] and "8 sets" in v.title
+    assert v.render_arguments()[3] == {"repetitions": 8}
+    press(v, "s")
+    assert_matches_headless(v, renderer, png(tmp_path / "p.png"))
+    v.on_mouse_button(MOUSE_LEFT, PRESS, 0, 80, 40)       # a drag: coarse single sets
+    v.on_cursor(84, 40)
+    clock[0] += 0.03
+    v.frame()
+    assert v.last_frame.quality == "coarse" and v.last_frame.accumulated == 1
+    v.on_mouse_button(MOUSE_LEFT, RELEASE, 0)
+    clock[0] += 0.5
+    v.refine()
+    assert v.last_frame.quality == "full" and v.last_frame.accumulated == 8
+    fixed = head_viewer(open_viewer, "--technique", "particles", "--repetitions", "3")
+    fixed.refine()
+    assert fixed.last_frame.accumulated == 1 and fixed.render_arguments()[3] == {"repetitions": 3}
 
 
 # ----------------------------------------------------------------------------- the command
