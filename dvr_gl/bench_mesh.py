@@ -35,7 +35,8 @@ import time
 import numpy as np
 
 from . import metrics
-from .bench import DEFAULT_DATA_DIR, Progress, _fmt, _machine, write_results
+from .bench import DEFAULT_DATA_DIR, _fmt, _machine, write_results
+from .progress import Progress
 from .scene import Camera, Scene, TetMesh, TransferFunction, default_camera
 
 MESHES = {  # name -> (file under the shared data folder, scalar array)

@@ -27,7 +27,8 @@ import numpy as np
 
 from . import metrics
 from .cache import TableCache
-from .bench import Progress, _fmt, _machine, write_results
+from .bench import _fmt, _machine, write_results
+from .progress import Progress
 from .scene import Scene, default_camera
 
 DATASETS = ("head", "bluntfin")

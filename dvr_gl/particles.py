@@ -41,6 +41,7 @@ transmittance of 1e-6 per unit distance.
 from __future__ import annotations
 
 import math
+import weakref
 from dataclasses import dataclass
 
 import numpy as np
@@ -85,17 +86,24 @@ def max_extinction(tf, lo, hi):
 
 
 def default_radius(scene):
-    """Half the width of a pixel at the distance of the data's centre from the eye
-    (orthographic: half a pixel): particles about a pixel across. Rounded to 6
-    significant digits, so that turning the camera about the data keeps the radius (and
-    the particles)."""
+    """Half the width of a pixel at the distance of the data's centre from the eye (at
+    least a quarter of the data's diagonal, for an eye inside the data; orthographic:
+    half a pixel): particles about a pixel across. Rounded to 6 significant digits, so
+    that turning the camera about the data keeps the radius (and the particles)."""
     cam = scene.camera
     lo, hi = scene.volume.bounds
     half_height = cam.screen_scale(scene.width, scene.height)[1]
     if cam.is_ortho:
         return float(f"{half_height / scene.height:.6g}")
-    distance = max(float(np.dot(0.5 * (lo + hi) - cam.eye, cam.forward)), 1e-12)
+    distance = max(float(np.dot(0.5 * (lo + hi) - cam.eye, cam.forward)), 0.25 * float(np.linalg.norm(hi - lo)))
     return float(f"{half_height * distance / scene.height:.6g}")
+
+
+def candidate_count(data, tf, radius):
+    """The mean number of candidates thinning draws per set (an upper bound of the
+    particles): the cells' largest extinction times their volume over pi r^2."""
+    cells = _cells(data)
+    return float((max_extinction(tf, cells.lo, cells.hi) * cells.volume).sum() / (math.pi * radius ** 2))
 
 
 def generate(data, tf, radius, seed=0, repetition=0, sampler="rejection"):
@@ -164,19 +172,24 @@ class _Cells:
     corners: object
 
 
+_CELLS = weakref.WeakKeyDictionary()    # data -> _Cells, while the data lives
+
+
 def _cells(data):
-    if hasattr(data, "tets"):
-        return _tet_cells(data)
-    return _grid_cells(data)
+    cells = _CELLS.get(data)
+    if cells is None:
+        cells = _CELLS[data] = _tet_cells(data) if hasattr(data, "tets") else _grid_cells(data)
+    return cells
 
 
 def _grid_cells(vol):
     v = vol.values(np.float64)
-    corners = [v[z:z + v.shape[0] - 1, y:y + v.shape[1] - 1, x:x + v.shape[2] - 1]
-               for z in (0, 1) for y in (0, 1) for x in (0, 1)]
-    lo = np.minimum.reduce(corners).ravel()
-    hi = np.maximum.reduce(corners).ravel()
-    volume = np.full(lo.size, float(np.prod(vol.spacing)))
+    eight = [v[z:z + v.shape[0] - 1, y:y + v.shape[1] - 1, x:x + v.shape[2] - 1]
+             for z in (0, 1) for y in (0, 1) for x in (0, 1)]
+    lo = np.minimum.reduce(eight).ravel()
+    hi = np.maximum.reduce(eight).ravel()
+    spacing = vol.spacing.copy()         # (the closures hold arrays, never the volume: cached weakly)
+    volume = np.full(lo.size, float(np.prod(spacing)))
     if vol.cell_valid is not None:
         volume[~vol.cell_valid.ravel()] = 0.0
     nz, ny, nx = (n - 1 for n in v.shape)
@@ -191,7 +204,7 @@ def _grid_cells(vol):
         c01 = v[k + 1, j, i] * (1 - fx) + v[k + 1, j, i + 1] * fx
         c11 = v[k + 1, j + 1, i] * (1 - fx) + v[k + 1, j + 1, i + 1] * fx
         s = (c00 * (1 - fy) + c10 * fy) * (1 - fz) + (c01 * (1 - fy) + c11 * fy) * fz
-        p = (np.stack([i, j, k], axis=1) + f) * vol.spacing
+        p = (np.stack([i, j, k], axis=1) + f) * spacing
         return p, s
 
     def corners(cells):
@@ -202,16 +215,16 @@ def _grid_cells(vol):
 
 
 def _tet_cells(mesh):
-    corner = mesh.bounds[0]
-    pts = mesh.points - corner
-    vals = mesh.scalars[mesh.tets]
+    pts = mesh.points - mesh.bounds[0]
+    tets = mesh.tets                     # (the closures hold arrays, never the mesh: cached weakly)
+    vals = mesh.scalars[tets]
     volume = np.abs(mesh.signed_volumes())
 
     def place(cells, rng):
         # uniform in a simplex: normalised exponential spacings (Dirichlet(1, 1, 1, 1))
         w = -np.log1p(-rng.random((cells.size, 4)))
         w /= w.sum(axis=1, keepdims=True)
-        p = np.einsum("nk,nkj->nj", w, pts[mesh.tets[cells]])
+        p = np.einsum("nk,nkj->nj", w, pts[tets[cells]])
         s = np.einsum("nk,nk->n", w, vals[cells])
         return p, s
     return _Cells(vals.min(axis=1), vals.max(axis=1), volume, place, lambda cells: vals[cells])

@@ -202,3 +202,23 @@ def test_samplers_on_a_feature_inside_one_cell():
     uniform = pbvr.generate(vol, rising, 0.2, sampler="uniform").scalars.mean()
     moved = pbvr.generate(vol, rising, 0.2, sampler="metropolis").scalars.mean()
     assert 0.45 < uniform < 0.55 and moved > 0.6
+
+
+def test_long_generation_shows_progress(monkeypatch, capsys):
+    monkeypatch.setattr(technique, "PROGRESS_CANDIDATES", 0)
+    plan = technique.make_plan(head_scene(w=32, h=32), repetitions=3)
+    err = capsys.readouterr().err
+    assert plan.count > 0 and "particles: set 3 of 3" in err and "3/3" in err
+
+
+def test_default_radius_with_the_eye_inside_the_data():
+    """Half a pixel at the data's centre, but at least at a quarter of its diagonal: an eye
+    at the centre does not ask for infinitely small particles."""
+    vol = bundled.ct_head()
+    lo, hi = vol.bounds
+    c = (lo + hi) / 2
+    inside = Scene(vol, bundled.ct_head_tf(), Camera(c, c + np.array([0, 0, -1.0]), fov=60), 64, 64)
+    outside = head_scene()
+    r_in, r_out = pbvr.default_radius(inside), pbvr.default_radius(outside)
+    assert 0 < r_in < r_out and r_in > 0.05 * r_out
+    assert technique.make_plan(inside).count > 0

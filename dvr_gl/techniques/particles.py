@@ -33,10 +33,12 @@ import numpy as np
 
 from .. import particles as pbvr
 from ..cache import TableCache
+from ..progress import Progress
 from ..scene import Scene
 from .common import TARGETS, bind, camera_uniforms, check_scene, check_target, data_projection
 
 MODES = ("composite",)
+PROGRESS_CANDIDATES = 5_000_000    # generation this large (all sets) shows a progress bar
 TAKES_STEP = False
 DATA = ("volume", "mesh")
 
@@ -87,7 +89,18 @@ def make_plan(scene, step=None, *, repetitions=1, seed=0, radius=None, sampler="
 
     def make(data, tf):
         t0 = time.perf_counter()
-        sets = [pbvr.generate(data, tf, radius, seed, k, sampler) for k in range(repetitions)]
+        progress = None
+        if repetitions * pbvr.candidate_count(data, tf, radius) >= PROGRESS_CANDIDATES:
+            progress = Progress(repetitions)
+        sets = []
+        for k in range(repetitions):
+            if progress is not None:
+                progress.begin(f"particles: set {k + 1} of {repetitions}")
+            sets.append(pbvr.generate(data, tf, radius, seed, k, sampler))
+            if progress is not None:
+                progress.advance(f"particles: set {k + 1} of {repetitions}")
+        if progress is not None:
+            progress.close()
         timing["generate"] = time.perf_counter() - t0
         return sets
 
