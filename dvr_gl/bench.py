@@ -528,13 +528,23 @@ def figure_png(rows, info) -> bytes:
             ax.plot([p[0] for p in pts], [p[1] for p in pts], marker=marker, color=color, label=label)
             for t, e, s in pts:
                 ax.annotate(f"{s:.3g}", (t, e), textcoords="offset points", xytext=(4, 4), fontsize=7, color=color)
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        ax.set_xlabel("median time per frame (ms)")
-        ax.set_ylabel("RMSE against exact (premultiplied RGBA)")
+        error_axes(ax, "median time per frame (ms)", "RMSE against exact (premultiplied RGBA)")
         ax.set_title(f"{name}, {info.get('size')}x{info.get('size')}, step in voxels")
-        ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=8)
+    return figure_bytes(fig)
+
+
+def error_axes(ax, xlabel, ylabel):
+    """Log-log axes of error against time, gridded, with a legend."""
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+
+
+def figure_bytes(fig):
+    """A matplotlib figure as PNG bytes."""
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=110)
     return buf.getvalue()

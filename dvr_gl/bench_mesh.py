@@ -35,7 +35,7 @@ import time
 import numpy as np
 
 from . import metrics
-from .bench import DEFAULT_DATA_DIR, _fmt, _machine, write_results
+from .bench import DEFAULT_DATA_DIR, _fmt, _machine, error_axes, figure_bytes, write_results
 from .progress import Progress
 from .scene import Camera, Scene, TetMesh, TransferFunction, default_camera
 
@@ -221,7 +221,6 @@ def format_mesh_table(rows):
 
 def figure_png(rows, info) -> bytes:
     """Error against new-view frame time, log-log, one point per renderer and data set."""
-    import io
     import matplotlib
     matplotlib.use("Agg", force=False)
     from matplotlib.figure import Figure
@@ -236,15 +235,9 @@ def figure_png(rows, info) -> bytes:
         ax.scatter([p[0] for p in pts], [max(p[1], 1e-12) for p in pts], color=color, marker=marker, label=label)
         for t, e, name in pts:
             ax.annotate(name, (t, max(e, 1e-12)), textcoords="offset points", xytext=(4, 4), fontsize=7, color=color)
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    ax.set_xlabel(f"median time per frame, new view each frame (ms, {info.get('size')}x{info.get('size')})")
-    ax.set_ylabel(f"RMSE against exact ({info.get('error_size')}x{info.get('error_size')})")
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8)
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110)
-    return buf.getvalue()
+    error_axes(ax, f"median time per frame, new view each frame (ms, {info.get('size')}x{info.get('size')})",
+               f"RMSE against exact ({info.get('error_size')}x{info.get('error_size')})")
+    return figure_bytes(fig)
 
 
 def run_mesh_bench(args) -> int:

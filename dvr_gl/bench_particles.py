@@ -27,7 +27,7 @@ import numpy as np
 
 from . import metrics
 from .cache import TableCache
-from .bench import _fmt, _machine, write_results
+from .bench import _fmt, _machine, error_axes, figure_bytes, write_results
 from .progress import Progress
 from .scene import Scene, default_camera
 
@@ -159,7 +159,6 @@ def format_particles_table(rows):
 def figure_png(rows, info) -> bytes:
     """Error against frame time, log-log: each data set's particle series (R marked) and
     its other technique."""
-    import io
     import matplotlib
     matplotlib.use("Agg", force=False)
     from matplotlib.figure import Figure
@@ -178,15 +177,9 @@ def figure_png(rows, info) -> bytes:
             if r["dataset"] == name and r["renderer"] != "dvr_gl particles":
                 ax.scatter([r["ms_median"]], [max(r["rmse"], 1e-12)], marker="s", color=color,
                            label=f"{name}: {r['renderer'].split()[-1]}")
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    ax.set_xlabel(f"median time per frame (ms, {info.get('size')}x{info.get('size')})")
-    ax.set_ylabel(f"RMSE against exact ({info.get('error_size')}x{info.get('error_size')})")
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8)
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110)
-    return buf.getvalue()
+    error_axes(ax, f"median time per frame (ms, {info.get('size')}x{info.get('size')})",
+               f"RMSE against exact ({info.get('error_size')}x{info.get('error_size')})")
+    return figure_bytes(fig)
 
 
 def run_particles_bench(args) -> int:

@@ -196,3 +196,31 @@ def box_proxy(scene):
         far = dmax * 1.01 + margin
     model = pyrr.matrix44.create_from_scale(extent, dtype=np.float64)
     return "box", model @ eye_view_projection(scene, near, far)
+
+
+class SizedTarget:
+    """An RGBA32F framebuffer (with a depth attachment when ``depth``) for a technique's
+    own passes, remade only when the image size changes."""
+
+    def __init__(self, ctx, depth=False):
+        self.ctx = ctx
+        self.depth = depth
+        self.size = None
+        self.fbo = None
+
+    def get(self, width, height):
+        if self.size != (width, height):
+            self.release()
+            depth = self.ctx.depth_texture((width, height)) if self.depth else None
+            self.fbo = self.ctx.framebuffer([self.ctx.texture((width, height), 4, dtype="f4")], depth)
+            self.size = (width, height)
+        return self.fbo
+
+    def release(self):
+        if self.fbo is not None:
+            for tex in self.fbo.color_attachments:
+                tex.release()
+            if self.fbo.depth_attachment is not None:
+                self.fbo.depth_attachment.release()
+            self.fbo.release()
+            self.fbo = None

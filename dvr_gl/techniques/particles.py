@@ -35,7 +35,7 @@ from .. import particles as pbvr
 from ..cache import TableCache
 from ..progress import Progress
 from ..scene import Scene
-from .common import TARGETS, bind, camera_uniforms, check_scene, check_target, data_projection
+from .common import TARGETS, SizedTarget, bind, camera_uniforms, check_scene, check_target, data_projection
 
 MODES = ("composite",)
 PROGRESS_CANDIDATES = 5_000_000    # generation this large (all sets) shows a progress bar
@@ -135,7 +135,7 @@ def draw(renderer, plan):
     fbo.clear(0.0, 0.0, 0.0, 0.0)
     if plan.count == 0:
         return fbo
-    scratch = renderer.resource("particles_scratch", make=lambda: _DepthTarget(ctx), capacity=1).get(
+    scratch = renderer.resource("particles_scratch", make=lambda: SizedTarget(ctx, depth=True), capacity=1).get(
         scene.width, scene.height)
     prog = renderer.programs.get("particles/particles.vert", "particles/particles.frag", plan.defines)
     average = renderer.programs.get("tetra/fullscreen.vert", "particles/average.frag")
@@ -177,28 +177,3 @@ class _Points:
     def release(self):
         self.vao.release()
         self.vbo.release()
-
-
-class _DepthTarget:
-    """An RGBA32F colour and float depth framebuffer for one repetition, kept per size."""
-
-    def __init__(self, ctx):
-        self.ctx = ctx
-        self.size = None
-        self.fbo = None
-
-    def get(self, width, height):
-        if self.size != (width, height):
-            self.release()
-            self.fbo = self.ctx.framebuffer([self.ctx.texture((width, height), 4, dtype="f4")],
-                                            self.ctx.depth_texture((width, height)))
-            self.size = (width, height)
-        return self.fbo
-
-    def release(self):
-        if self.fbo is not None:
-            for tex in self.fbo.color_attachments:
-                tex.release()
-            self.fbo.depth_attachment.release()
-            self.fbo.release()
-            self.fbo = None

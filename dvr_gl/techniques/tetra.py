@@ -45,7 +45,7 @@ from ..cache import TableCache
 from ..mesh import LOCAL_FACES, Order, centroid_order, mpvo_order, topology, visible_cells
 from ..reference.linear_segment import SegmentKnots
 from ..scene import Scene
-from .common import TARGETS, bind, camera_uniforms, check_scene, check_target, data_projection, knot_uniforms
+from .common import TARGETS, SizedTarget, bind, camera_uniforms, check_scene, check_target, data_projection, knot_uniforms
 
 MODES = ("composite", "mip", "minip", "average")
 TAKES_STEP = False
@@ -217,7 +217,7 @@ def draw(renderer, plan):
         return fbo
     if not composite:
         # the reduction needs float precision whatever the output target is
-        reduced = renderer.resource("tetra_reduced", make=lambda: _Reduced(ctx), capacity=1).get(
+        reduced = renderer.resource("tetra_reduced", make=lambda: SizedTarget(ctx), capacity=1).get(
             scene.width, scene.height)
         reduced.use()
         reduced.clear(-3.0e38 if scene.mode != "average" else 0.0, 0.0, 0.0, 0.0)
@@ -253,29 +253,6 @@ def draw(renderer, plan):
         knot_uniforms(classify, plan.knots, plan.defines["KNOT_CAPACITY"])
         renderer.empty_vao(classify).render(ctx.TRIANGLES, vertices=3)
     return fbo
-
-
-class _Reduced:
-    """An RGBA32F framebuffer for the reductions (mip, minip, average), kept per size."""
-
-    def __init__(self, ctx):
-        self.ctx = ctx
-        self.size = None
-        self.fbo = None
-
-    def get(self, width, height):
-        if self.size != (width, height):
-            self.release()
-            self.fbo = self.ctx.framebuffer([self.ctx.texture((width, height), 4, dtype="f4")])
-            self.size = (width, height)
-        return self.fbo
-
-    def release(self):
-        if self.fbo is not None:
-            for tex in self.fbo.color_attachments:
-                tex.release()
-            self.fbo.release()
-            self.fbo = None
 
 
 class _FaceIndices:
