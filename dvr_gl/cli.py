@@ -139,8 +139,8 @@ def add_render_options(r):
                         "{\"color\": [[s, r, g, b], ...], \"opacity\": [[s, a], ...], \"unit_distance\": u}; "
                         "default: auto (the data set's own for builtin inputs)")
     r.add_argument("--technique", default=None,
-                   help="rendering technique: raycast, slice2d or slice3d for volumes, tetra for meshes, "
-                        "particles for both (default: raycast, or tetra for a mesh)")
+                   help="rendering technique: raycast, slice2d, slice3d or splat for volumes, tetra for "
+                        "meshes, particles for both (default: raycast, or tetra for a mesh)")
     r.add_argument("--scalars", metavar="NAME",
                    help="mesh inputs: the point array to render (default: the first scalar array)")
     r.add_argument("--sort", choices=SORTS,
@@ -149,7 +149,12 @@ def add_render_options(r):
                    help="particles: independent particle sets averaged (default: 1)")
     r.add_argument("--seed", type=_count, metavar="N", help="particles: random seed (default: 0)")
     r.add_argument("--radius", type=_positive, metavar="W",
-                   help="particles: particle radius in world units (default: half a pixel at the data)")
+                   help="particles: particle radius in world units (default: half a pixel at the data); "
+                        "splat: kernel standard deviation in sample spacings (default: 0.4)")
+    r.add_argument("--density", type=_count, metavar="K",
+                   help="splat: samples per data spacing along each axis (default: 1)")
+    r.add_argument("--cutoff", type=_positive, metavar="C",
+                   help="splat: kernel truncation in standard deviations (default: 3)")
     r.add_argument("--sampler", choices=("rejection", "uniform", "metropolis"),
                    help="particles: placement in each cell (default: rejection, unbiased)")
     r.add_argument("--step", type=_positive, metavar="S",
@@ -196,12 +201,12 @@ def add_render_options(r):
 # which technique takes which option
 TECHNIQUE_OPTIONS = {"interpolate": ("slice2d",), "proxy": ("slice3d",), "shells": ("slice3d",),
                      "preintegrate": ("raycast", "slice2d", "slice3d"), "sort": ("tetra",),
-                     "repetitions": ("particles",), "seed": ("particles",), "radius": ("particles",),
-                     "sampler": ("particles",)}
+                     "repetitions": ("particles",), "seed": ("particles",), "radius": ("particles", "splat"),
+                     "sampler": ("particles",), "density": ("splat",), "cutoff": ("splat",)}
 
 #: the techniques that render meshes (cell projection); the others render grid volumes
 MESH_TECHNIQUES = ("tetra",)
-GRID_TECHNIQUES = ("raycast", "slice2d", "slice3d")
+GRID_TECHNIQUES = ("raycast", "slice2d", "slice3d", "splat")
 
 # volume-only options (raw geometry and masking): given with a mesh INPUT, a usage error
 _VOLUME_OPTIONS = (("spacing", "--spacing"), ("origin", "--origin"), ("mask_nonfinite", "--mask-nonfinite"))
@@ -229,7 +234,7 @@ def technique_options(args):
     _check_input_kind(args, mesh)
     kwargs = {"technique": args.technique}
     for name in ("step", "preintegrate", "interpolate", "proxy", "shells", "sort", "repetitions", "seed",
-                 "radius", "sampler", "target"):
+                 "radius", "sampler", "density", "cutoff", "target"):
         value = getattr(args, name, None)
         if value is None or value is False:
             continue
@@ -244,6 +249,8 @@ def technique_options(args):
             raise UsageError("--step", f"{args.technique} integrates each cell exactly and takes no step")
         if name == "step" and args.technique == "particles":
             raise UsageError("--step", "particles takes no step (the particles' density follows the TF)")
+        if name == "step" and args.technique == "splat":
+            raise UsageError("--step", "splat takes no step; --density sets the samples per spacing")
         kwargs[name] = value
     return kwargs
 

@@ -371,7 +371,7 @@ def test_mesh_input_picks_tetra_and_takes_its_options(tiny_mesh, tiny):
 @pytest.mark.parametrize("name, extra, option, fragment", [
     ("tiny.vtu", ["--technique", "raycast"], "--technique", "raycast renders grid volumes"),
     ("tiny.vtu", ["--technique", "slice3d"], "--technique", "use --technique tetra"),
-    ("tiny.npy", ["--technique", "tetra"], "--technique", "use --technique raycast, slice2d or slice3d"),
+    ("tiny.npy", ["--technique", "tetra"], "--technique", "use --technique raycast, slice2d, slice3d or splat"),
     ("tiny.npy", ["--scalars", "ramp"], "--scalars", "grid volume"),
     ("tiny.npy", ["--sort", "mpvo"], "--sort", "applies to --technique tetra only, not raycast"),
     ("tiny.vtu", ["--sort", "bubble"], "argument --sort", "'bubble'"),
@@ -513,3 +513,22 @@ def test_particles_bench_quick_run(tmp_path, capsys):
     assert float(rows[1]["rmse"]) < float(rows[0]["rmse"]) and int(rows[0]["particles"]) > 0
     bad = parser.parse_args(["--suite", "particles", "--repetitions-list", "0,4"])
     assert bench.run_bench(bad) == 2
+
+
+def test_render_splat_options(renderer, tiny, capsys):
+    d, _ = tiny
+    vol = load_volume(d / "tiny.npy")
+    out = d / "splat.png"
+    argv = ["--technique", "splat", "--density", "2", "--radius", "0.5", "--cutoff", "2.5", "--size", "24x24",
+            "--out", out]
+    code, stdout, err = _run(["render", d / "tiny.npy"] + argv, capsys)
+    assert code == 0, err
+    scene = dvr_gl.Scene(vol, auto_preset(vol), dvr_gl.default_camera(vol), 24, 24)
+    want = renderer.render(scene, technique="splat", density=2, radius=0.5, cutoff=2.5)
+    assert np.array_equal(_png(out)[1], to_png_array(want)) and want[..., 3].max() > 0
+    for extra, message in ((["--step", "1"], "--step: splat takes no step"),
+                           (["--seed", "1"], "--seed: applies to --technique particles only, not splat")):
+        code, _, err = _run(["render", d / "tiny.npy"] + argv + extra, capsys)
+        assert code == 2 and message in err, err
+    code, _, err = _run(["render", d / "tiny.npy", "--density", "2", "--out", out], capsys)
+    assert code == 2 and "--density: applies to --technique splat only, not raycast" in err

@@ -317,7 +317,7 @@ def test_reference_and_gl_reject_bad_options(renderer):
             renderer.render(scene, **kwargs)
         with pytest.raises(exc, match=text):
             reference.render(scene, **kwargs)
-    with pytest.raises(ValueError, match="technique must be one of raycast, slice2d, slice3d, tetra, particles, got 'splatz'"):
+    with pytest.raises(ValueError, match="technique must be one of raycast, slice2d, slice3d, tetra, particles, splat, got 'splatz'"):
         renderer.render(scene, technique="splatz")
 
 

@@ -859,11 +859,14 @@ def test_mesh_screenshot_matches_headless(mesh_viewer, renderer, tmp_path):
 
 def test_mesh_orbit_sort_and_modes(mesh_viewer):
     v = mesh_viewer()
+    clock = [0.0]                                       # input settles when the test says so
+    v.clock = lambda: clock[0]
     v.refine()
     before = v.render_image()
     back = v.orbit.back.copy()
     drag(v, (80, 40), (110, 30))                        # orbit: a new view of the ball
     assert not np.allclose(v.orbit.back, back)
+    clock[0] += 1.0
     v.refine()
     after = v.render_image()
     assert after[..., 3].max() > 0.5 and np.abs(after - before).max() > 0.05

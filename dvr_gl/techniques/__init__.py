@@ -10,7 +10,7 @@ import importlib
 
 _MODULES = {"raycast": "dvr_gl.techniques.raycast", "slice2d": "dvr_gl.techniques.slice2d",
             "slice3d": "dvr_gl.techniques.slice3d", "tetra": "dvr_gl.techniques.tetra",
-            "particles": "dvr_gl.techniques.particles"}
+            "particles": "dvr_gl.techniques.particles", "splat": "dvr_gl.techniques.splat"}
 
 
 def names():

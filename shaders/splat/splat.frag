@@ -1,0 +1,40 @@
+// One splat on one pixel (NumPy twin: reference/splat.py): the kernel, an axis-aligned
+// Gaussian of covariance diag(sigma^2), integrated exactly along this pixel's ray (no
+// affine approximation: the ray's own direction, under perspective too), zero where the
+// ray passes farther than the cutoff (in standard deviations) from the centre. The
+// kernel's optical depth there becomes the splat's opacity; GL blends it over what is
+// behind (splats arrive back to front).
+#version 330 core
+
+#ifndef ORTHO
+#define ORTHO 0
+#endif
+
+#include "common/camera_ray.glsl"
+#include "common/compositing.glsl"
+
+flat in vec3 v_center;
+flat in vec4 v_sample;
+
+uniform vec3 u_inv_var;        // 1 / sigma^2 per axis
+uniform float u_cutoff2;       // cutoff^2
+uniform float u_norm;          // 1 / (2 pi sqrt(det) (1 - exp(-cutoff^2 / 2)))
+
+out vec4 frag_color;
+
+void main() {
+    vec3 origin, dir;
+    pixelRay(origin, dir);
+    vec3 q = origin - v_center;
+    float a = dot(dir * dir, u_inv_var);
+    float b = dot(dir * q, u_inv_var);
+    if (b >= 0.0) discard;                    // the kernel's centre is not ahead of the ray's start
+    // the ray's squared distance in standard deviations, from the offset at its closest
+    // approach (c - b^2 / a would cancel catastrophically for a distant eye)
+    vec3 off = q - (b / a) * dir;
+    float m2 = dot(off * off, u_inv_var);
+    if (m2 > u_cutoff2) discard;
+    float depth = v_sample.a * u_norm * inversesqrt(a) * exp(-0.5 * m2);
+    float alpha = -expm1Accurate(-depth);
+    frag_color = vec4(v_sample.rgb * alpha, alpha);
+}

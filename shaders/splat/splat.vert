@@ -1,0 +1,24 @@
+// Splatting: every classified sample a Gaussian kernel, drawn as a point sprite large
+// enough for the kernel's truncation ellipsoid (bounded by a sphere of u_reach).
+#version 330 core
+
+#include "common/sprite.glsl"
+
+in vec3 a_position;            // relative to the data's lower corner
+in vec4 a_sample;              // the sample's colour, and its extinction times the cell volume
+
+uniform mat4 u_view_proj;
+uniform vec3 u_eye;            // relative to the data's lower corner
+uniform vec3 u_forward;
+uniform float u_reach;         // cutoff * the kernel's largest standard deviation
+uniform float u_pixels_per_unit;
+
+flat out vec3 v_center;
+flat out vec4 v_sample;
+
+void main() {
+    gl_Position = u_view_proj * vec4(a_position, 1.0);
+    gl_PointSize = spriteSize(a_position, u_reach, u_eye, u_forward, u_pixels_per_unit);
+    v_center = a_position;
+    v_sample = a_sample;
+}
