@@ -1,5 +1,5 @@
-"""``dvr-gl bench --suite particles``: particle-based volume rendering against exact and
-beside the technique each data set has otherwise (ray casting for the CT head grid,
+"""``dvr-gl bench --suite particles``: the point primitives (particle-based volume
+rendering, splatting) against exact and beside the technique each data set has otherwise (ray casting for the CT head grid,
 projected tetrahedra for the blunt fin mesh), in one run.
 
 Per data set:
@@ -13,7 +13,8 @@ Per data set:
   read-back; particles are made once per TF, so a new view costs only this), median of
   ``--repeats`` frames after one warm-up, each frame from a new view;
 - the same frame time and error for the data set's other technique (raycast at a
-  half-voxel step; tetra with MPVO).
+  half-voxel step; tetra with MPVO), and on grids for splatting (density 1 and 2, default
+  kernel) and VTK's GPU ray caster at a one-voxel step (the bar splatting is held to).
 """
 
 from __future__ import annotations
@@ -27,12 +28,12 @@ import numpy as np
 
 from . import metrics
 from .cache import TableCache
-from .bench import _fmt, _machine, error_axes, figure_bytes, write_results
+from .bench import CHEST_FILE, _fmt, _machine, error_axes, figure_bytes, write_results
 from .progress import Progress
 from .scene import Scene, default_camera
 
-DATASETS = ("head", "bluntfin")
-VIEWS = {"head": (30.0, 15.0), "bluntfin": (30.0, 20.0)}     # azimuth, elevation
+DATASETS = ("head", "chest", "bluntfin")
+VIEWS = {"head": (30.0, 15.0), "chest": (30.0, 15.0), "bluntfin": (30.0, 20.0)}     # azimuth, elevation
 CSV_FIELDS = ["dataset", "renderer", "repetitions", "width", "particles", "generate_ms", "generate_per_s",
               "draw_ms", "drawn_per_s", "ms_median", "error_size", "rmse", "max_abs"]
 
@@ -42,6 +43,10 @@ def _scene(name, size, data_dir):
         from .data import ct_head, ct_head_tf
         vol = ct_head()
         return Scene(vol, ct_head_tf(), _camera(vol, name), size, size), ("raycast", {"step": 0.5 * vol.min_spacing})
+    if name == "chest":
+        from .bench import chest_ct, chest_tf
+        vol = chest_ct(os.path.join(data_dir, CHEST_FILE) if data_dir else None)
+        return Scene(vol, chest_tf(vol), _camera(vol, name), size, size), ("raycast", {"step": 0.5 * vol.min_spacing})
     if name == "bluntfin":
         from .bench_mesh import load_mesh_dataset
         mesh, tf = load_mesh_dataset("bluntfin", data_dir)
@@ -115,18 +120,43 @@ def run_particles(args, err=None):
                                      max_abs=e["max_abs"]))
                 slope = float(np.polyfit(np.log(reps), np.log(errors), 1)[0]) if len(reps) > 1 else None
                 info["slopes"][name] = {"slope": slope, "rmse_last_over_first": errors[-1] / errors[0]}
-                e = metrics.compare(gl.render(small, technique=peer, **peer_options), exact)
-                frame = _timed(gl, scene, name, peer, peer_options, args.repeats)
-                rows.append(dict(dataset=name, renderer=f"dvr_gl {peer}", repetitions=None, width=args.size,
-                                 particles=None, generate_ms=None, generate_per_s=None, draw_ms=None,
-                                 drawn_per_s=None, ms_median=1e3 * frame, error_size=args.error_size,
-                                 rmse=e["rmse"], max_abs=e["max_abs"]))
-                progress.advance(f"{name}: {peer}")
+                others = [(f"dvr_gl {peer}", peer, peer_options)]
+                if not scene.is_mesh:
+                    others += [(f"dvr_gl splat density {k}", "splat", {"density": k}) for k in (1, 2)]
+                for label, other, options in others:
+                    e = metrics.compare(gl.render(small, technique=other, **options), exact)
+                    frame = _timed(gl, scene, name, other, options, args.repeats)
+                    rows.append(_plain_row(name, label, args, frame, e))
+                if not scene.is_mesh and not args.no_vtk:
+                    row = _vtk_row(name, scene, small, exact, args, err)
+                    if row is not None:
+                        rows.append(row)
+                progress.advance(f"{name}: {peer}, splat, VTK")
     finally:
         progress.close()
     info.update(_machine(), size=args.size, error_size=args.error_size, repeats=args.repeats, suite="particles",
                 datasets=names, repetitions=reps)
     return rows, info
+
+
+def _plain_row(name, label, args, seconds, e):
+    return dict(dataset=name, renderer=label, repetitions=None, width=args.size, particles=None, generate_ms=None,
+                generate_per_s=None, draw_ms=None, drawn_per_s=None, ms_median=1e3 * seconds,
+                error_size=args.error_size, rmse=e["rmse"], max_abs=e["max_abs"])
+
+
+def _vtk_row(name, scene, small, exact, args, err):
+    """VTK's GPU ray caster at a one-voxel step (the bar splatting is held to)."""
+    try:
+        from . import vtk_peer
+        vtk_peer._import_vtk()
+    except ImportError as e:
+        print(f"dvr-gl bench: VTK not available ({e}); its row is left out", file=err)
+        return None
+    step = scene.volume.min_spacing
+    image, _ = vtk_peer.render_vtk(small, step, repeats=1, warmup=0)
+    _, seconds = vtk_peer.render_vtk(scene, step, repeats=args.repeats, warmup=1)
+    return _plain_row(name, "VTK raycast 1 voxel", args, seconds, metrics.compare(image, exact))
 
 
 def _draw_seconds(gl, plan, repeats=3):

@@ -498,8 +498,10 @@ def test_render_particles_on_a_grid_and_a_mesh(renderer, tiny, tiny_mesh, capsys
 
 
 def test_particles_bench_quick_run(tmp_path, capsys):
-    """`dvr-gl bench --suite particles` end to end on the CT head (64x64): a row per R and
-    the ray caster's, the slope printed, results written."""
+    """`dvr-gl bench --suite particles` end to end on the CT head (64x64): a row per R,
+    the ray caster's, splatting's at density 1 and 2 and VTK's, the slope printed, results
+    written."""
+    pytest.importorskip("vtk")
     from dvr_gl import bench
     parser = argparse.ArgumentParser()
     bench.add_arguments(parser)
@@ -509,8 +511,11 @@ def test_particles_bench_quick_run(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "head: RMSE falls with R at a log-log slope of" in out
     rows = list(csv.DictReader(open(tmp_path / "p.csv")))
-    assert [r["repetitions"] for r in rows] == ["1", "4", ""] and rows[-1]["renderer"] == "dvr_gl raycast"
+    assert [r["repetitions"] for r in rows[:2]] == ["1", "4"]
+    assert [r["renderer"] for r in rows[2:]] == ["dvr_gl raycast", "dvr_gl splat density 1", "dvr_gl splat density 2",
+                                                 "VTK raycast 1 voxel"]
     assert float(rows[1]["rmse"]) < float(rows[0]["rmse"]) and int(rows[0]["particles"]) > 0
+    assert float(rows[4]["rmse"]) < float(rows[3]["rmse"])          # splat: density 2 is closer to exact
     bad = parser.parse_args(["--suite", "particles", "--repetitions-list", "0,4"])
     assert bench.run_bench(bad) == 2
 
