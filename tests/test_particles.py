@@ -106,6 +106,9 @@ def test_same_seed_same_image_and_turning_generates_nothing(renderer, monkeypatc
     other = renderer.render(scene, technique="particles", repetitions=3, seed=6)
     assert not np.array_equal(first, other)
     assert len(calls) == 6
+    more = technique.make_plan(scene, repetitions=5, seed=5, tables=renderer.tables)   # sets 0-2 reused
+    assert len(calls) == 8 and more.sets[:3] == technique.make_plan(scene, repetitions=3, seed=5,
+                                                                    tables=renderer.tables).sets
 
 
 def test_only_cells_with_opacity_make_particles(renderer):
