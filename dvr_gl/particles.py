@@ -17,7 +17,7 @@ opacity 1 gives a pixel whose expected value is ``integral c tau T dt`` with exp
 alpha ``1 - T``: the emission-absorption image. What remains is noise, which averaging
 ``R`` independent particle sets divides by ``sqrt(R)``, and a bias of order ``r^2``
 (``rho`` averaged over the ray's cylinder, and the domain's edge cutting it), which a
-radius of half a pixel keeps below a pixel's own footprint.
+radius of at most half a pixel and half a cell keeps small.
 
 Sampling by thinning (``sampler="rejection"``). Per cell (grid cell or tetrahedron) the
 largest extinction over the cell's scalar range bounds ``tau`` there; a Poisson number of
@@ -88,15 +88,22 @@ def max_extinction(tf, lo, hi):
 def default_radius(scene):
     """Half the width of a pixel at the distance of the data's centre from the eye (at
     least a quarter of the data's diagonal, for an eye inside the data; orthographic:
-    half a pixel): particles about a pixel across. Rounded to 6 significant digits, so
-    that turning the camera about the data keeps the radius (and the particles)."""
+    half a pixel), and at most half the data's resolution (the smallest grid spacing, or
+    a mesh's median edge): particles no wider than a pixel or a cell, since the bias
+    grows with the radius squared times the density's curvature. Rounded to 6
+    significant digits, so that turning the camera about the data keeps the radius (and
+    the particles)."""
     cam = scene.camera
-    lo, hi = scene.volume.bounds
+    data = scene.volume
+    lo, hi = data.bounds
     half_height = cam.screen_scale(scene.width, scene.height)[1]
     if cam.is_ortho:
-        return float(f"{half_height / scene.height:.6g}")
-    distance = max(float(np.dot(0.5 * (lo + hi) - cam.eye, cam.forward)), 0.25 * float(np.linalg.norm(hi - lo)))
-    return float(f"{half_height * distance / scene.height:.6g}")
+        pixel = 2.0 * half_height / scene.height
+    else:
+        distance = max(float(np.dot(0.5 * (lo + hi) - cam.eye, cam.forward)), 0.25 * float(np.linalg.norm(hi - lo)))
+        pixel = 2.0 * half_height * distance / scene.height
+    cell = data.cell_size if hasattr(data, "tets") else data.min_spacing
+    return float(f"{0.5 * min(pixel, cell):.6g}")
 
 
 def candidate_count(data, tf, radius):

@@ -223,5 +223,8 @@ def test_default_radius_with_the_eye_inside_the_data():
     inside = Scene(vol, bundled.ct_head_tf(), Camera(c, c + np.array([0, 0, -1.0]), fov=60), 64, 64)
     outside = head_scene()
     r_in, r_out = pbvr.default_radius(inside), pbvr.default_radius(outside)
-    assert 0 < r_in < r_out and r_in > 0.05 * r_out
+    assert 0 < r_in <= r_out and r_in > 0.05 * r_out
+    assert r_out <= 0.5 * vol.min_spacing                       # never wider than half a cell
+    far = outside.replace(width=16, height=16)
+    assert pbvr.default_radius(far) == 0.5 * vol.min_spacing
     assert technique.make_plan(inside).count > 0

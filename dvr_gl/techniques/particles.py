@@ -14,7 +14,8 @@ Options (same names in ``dvr_gl.reference.render``)
 ---------------------------------------------------
 repetitions : int >= 1 (default 1), independent particle sets averaged.
 seed : int (default 0); set k draws from ``numpy.random.default_rng([seed, k])``.
-radius : world units (default: half a pixel at the data's centre, ``particles.default_radius``).
+radius : world units (default: half a pixel at the data's centre, at most half a cell;
+    ``particles.default_radius``).
     The particle count grows as 1 / radius^2, the bias as radius^2.
 sampler : "rejection" (Poisson candidates per cell thinned by tau(s) / tau_max: exact).
 target : "rgba32f" (default) | "rgba16f" | "rgba8": the averaged image's target.
