@@ -93,25 +93,34 @@ class SplatPlan:
 
 def make_splats(volume, tf, density):
     """The classified samples of ``volume`` at ``density`` samples per spacing (those
-    with non-zero opacity)."""
+    with non-zero opacity), made a plane of samples at a time (bounded memory)."""
     dims = volume.dims
     n = (dims - 1) * density + 1
-    axes = [np.arange(k) / density for k in n]          # continuous sample indices, x, y, z
-    idx = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)   # x slowest
     values = volume.values(np.float64)
-    s = trilinear(values, idx)
-    keep = np.asarray(tf.opacity(s)) > 0
-    if volume.cell_valid is not None:
-        keep &= cell_is_valid(volume, idx)
-    idx, s = idx[keep], s[keep]
     spacing = volume.spacing / density
-    alpha = np.minimum(tf.opacity(s), ALPHA_CAP)
-    tau = -np.log1p(-alpha) / tf.unit_distance
-    # trapezoid weights: a sample on a face of the box stands for half a cell along that
-    # axis, so the kernels carry exactly the integral of tau over the box
-    weight = np.prod(np.where((idx == 0) | (idx == dims - 1), 0.5, 1.0), axis=1)
-    samples = np.concatenate([tf.color(s).reshape(-1, 3), (tau * weight * np.prod(spacing))[:, None]], axis=1)
-    return Splats((idx * volume.spacing).astype(np.float32), samples.astype(np.float32), spacing)
+    cell = float(np.prod(spacing))
+    yy, xx = np.meshgrid(np.arange(n[1]) / density, np.arange(n[0]) / density, indexing="ij")
+    points, samples = [], []
+    for k in range(n[2]):
+        idx = np.stack([xx.ravel(), yy.ravel(), np.full(xx.size, k / density)], axis=1)   # x, y, z indices
+        s = trilinear(values, idx)
+        alpha = np.minimum(tf.opacity(s), ALPHA_CAP)
+        keep = alpha > 0
+        if volume.cell_valid is not None:
+            keep &= cell_is_valid(volume, idx)
+        if not keep.any():
+            continue
+        idx, s, alpha = idx[keep], s[keep], alpha[keep]
+        tau = -np.log1p(-alpha) / tf.unit_distance
+        # trapezoid weights: a sample on a face of the box stands for half a cell along
+        # that axis, so the kernels carry exactly the integral of tau over the box
+        weight = np.prod(np.where((idx == 0) | (idx == dims - 1), 0.5, 1.0), axis=1)
+        points.append((idx * volume.spacing).astype(np.float32))
+        samples.append(np.concatenate([tf.color(s).reshape(-1, 3), (tau * weight * cell)[:, None]],
+                                      axis=1).astype(np.float32))
+    if not points:
+        return Splats(np.zeros((0, 3), np.float32), np.zeros((0, 4), np.float32), spacing)
+    return Splats(np.concatenate(points), np.concatenate(samples), spacing)
 
 
 def back_to_front(scene, splats):
