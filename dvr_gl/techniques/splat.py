@@ -113,7 +113,7 @@ def make_splats(volume, tf, density):
         idx, s, alpha = idx[keep], s[keep], alpha[keep]
         tau = -np.log1p(-alpha) / tf.unit_distance
         # trapezoid weights: a sample on a face of the box stands for half a cell along
-        # that axis, so the kernels carry exactly the integral of tau over the box
+        # that axis, so the kernels carry the trapezoid rule's integral of tau over the box
         weight = np.prod(np.where((idx == 0) | (idx == dims - 1), 0.5, 1.0), axis=1)
         points.append((idx * volume.spacing).astype(np.float32))
         samples.append(np.concatenate([tf.color(s).reshape(-1, 3), (tau * weight * cell)[:, None]],
