@@ -6,8 +6,9 @@ The model. With samples ``x_i`` on a grid of spacing ``h`` (the data's, or ``den
 times finer per axis, resampled trilinearly) and an axis-aligned Gaussian kernel ``g`` of
 standard deviation ``sigma = radius * h`` per axis (unit integral), the extinction is
 reconstructed as ``tau(x) = sum_i tau(s_i) V_i g(x - x_i)`` (``V_i`` the sample's share
-of the box: a cell's volume, halved per axis on the box's faces, the trapezoid rule). Along a pixel's ray the kernel's optical depth is ``tau(s_i) V F_i``, with
-``F_i`` the kernel's integral along that ray, in closed form for a Gaussian:
+of the box: a cell's volume, halved per axis on the box's faces, the trapezoid rule).
+Along a pixel's ray the kernel's optical depth is ``tau(s_i) V_i F_i``, with ``F_i`` the
+kernel's integral along that ray, in closed form for a Gaussian:
 
     F = exp(-m^2 / 2) / (2 pi sqrt(det Sigma) sqrt(d' Sigma^-1 d))
 
@@ -16,7 +17,7 @@ The shader evaluates it per fragment along the fragment's own ray, which is what
 splatting approximates with an affine map: exact under perspective and for anisotropic
 spacing. The kernel is truncated at ``cutoff`` standard deviations (``F = 0`` for rays
 farther away; the rest renormalised). Each splat is composited over what is behind it,
-with opacity ``1 - exp(-tau V F)`` and colour ``c(s_i)`` (the sample classified first,
+with opacity ``1 - exp(-tau V_i F_i)`` and colour ``c(s_i)`` (the sample classified first,
 then reconstructed: pre-classification).
 
 Order: per view the samples are sorted by depth, back to front (float32 argsort), and
@@ -26,7 +27,7 @@ volume, transfer function and density.
 
 Options (same names in ``dvr_gl.reference.render``)
 ---------------------------------------------------
-density : int >= 1 (default 1), samples per data spacing along each axis.
+density : int from 1 to 8 (default 1), samples per data spacing along each axis.
 radius : kernel standard deviation in sample spacings (default 0.4: the balance of holes
     and blur measured in the README).
 cutoff : truncation in standard deviations (default 3).
