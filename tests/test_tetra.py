@@ -254,7 +254,7 @@ def test_options_and_data_kinds_are_checked(renderer):
     vol = dvr_gl.Volume(np.zeros((2, 2, 2), np.float32))
     with pytest.raises(ValueError, match="Volume"):
         renderer.render(scene.replace(volume=vol), technique="tetra")
-    assert dvr_gl.techniques.for_scene(scene) == ("tetra", "particles")
+    assert dvr_gl.techniques.for_scene(scene) == ("tetra", "particles", "splat")
 
 
 def test_segment_integral_shader_matches_numpy(renderer):

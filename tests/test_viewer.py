@@ -809,7 +809,7 @@ def _ball_region(image, panel_top):
 
 def test_mesh_opens_with_tetra_and_shows_the_ball(mesh_viewer):
     v = mesh_viewer()                                   # Settings' default technique is raycast
-    assert v.technique == "tetra" and v.available_techniques == ["tetra", "particles"]
+    assert v.technique == "tetra" and v.available_techniques == ["tetra", "particles", "splat"]
     assert "technique tetra" in v.messages[-1] and "raycast" in v.messages[-1]
     for name in ("raycast", "slice2d", "slice3d"):
         if name in v.techniques:
@@ -899,11 +899,12 @@ def test_mesh_orbit_sort_and_modes(mesh_viewer):
     else:
         assert any("tetra cannot render isosurface" in m for m in v.messages)
     # keys for options tetra lacks: said, not crashed
-    # t: the other technique that renders meshes (particles), then back
-    press(v, "t")
-    assert v.technique == "particles"
-    v.refine()
-    assert v.last_frame.quality == "full" and v.render_image()[..., 3].max() > 0.1
+    # t: the other techniques that render meshes (particles, splat), then back
+    for name in ("particles", "splat"):
+        press(v, "t")
+        assert v.technique == name
+        v.refine()
+        assert v.last_frame.quality == "full" and v.render_image()[..., 3].max() > 0.1
     press(v, "t")
     assert v.technique == "tetra"
     v.refine()

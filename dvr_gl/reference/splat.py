@@ -27,6 +27,7 @@ def render_plan(plan, lut_exact=False):
     order = plan.order
     centres = plan.splats.points[order].astype(np.float64)
     samples = plan.splats.samples[order].astype(np.float64)
+    scales = plan.splats.scales[order].astype(np.float64)
     sigma = plan.sigma
     inv_var = 1.0 / sigma ** 2
     u = plan.kernel_uniforms()
@@ -36,7 +37,7 @@ def render_plan(plan, lut_exact=False):
     rank = np.flatnonzero(inside)                                           # draw position
     cx = (clip[rank, 0] / w[rank] + 1) * 0.5 * W
     cy = (1 - clip[rank, 1] / w[rank]) * 0.5 * H
-    reach = plan.cutoff * float(sigma.max())
+    reach = plan.cutoff * float(sigma.max()) * scales[rank]
     eye = cam.eye - lo
     depth = 1.0 if cam.is_ortho else np.maximum((centres[rank] - eye) @ cam.forward - reach, 1e-6)
     half = np.ceil(3.0 * reach * pixels_per_unit(scene) / depth + 2.0).astype(np.int64) * np.ones(rank.size, np.int64)
@@ -57,12 +58,14 @@ def render_plan(plan, lut_exact=False):
         pixel = (y0[ids] + k // nx[ids]) * W + x0[ids] + k % nx[ids]
         q = origins[pixel] - centres[rank[ids]]
         d = dirs[pixel]
-        a = (d * d) @ inv_var
-        b = (d * q) @ inv_var
+        scale = scales[rank[ids]]
+        iv = inv_var[None, :] / (scale * scale)[:, None]
+        a = np.einsum("ij,ij->i", d * d, iv)
+        b = np.einsum("ij,ij->i", d * q, iv)
         off = q - (b / a)[:, None] * d
-        m2 = (off * off) @ inv_var
+        m2 = np.einsum("ij,ij->i", off * off, iv)
         hit = (b < 0) & (m2 <= u["u_cutoff2"])
-        od = samples[rank[ids], 3] * u["u_norm"] / np.sqrt(a) * np.exp(-0.5 * m2)
+        od = samples[rank[ids], 3] * u["u_norm"] / scale ** 3 / np.sqrt(a) * np.exp(-0.5 * m2)
         alpha = -np.expm1(-od)
         pixels.append(pixel[hit])
         ranks.append(rank[ids][hit])

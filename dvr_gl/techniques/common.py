@@ -21,10 +21,10 @@ def check_scene(scene, technique, modes=None, data="volume"):
     kinds = (data,) if isinstance(data, str) else tuple(data)      # a technique may take both
     if scene.is_mesh and "mesh" not in kinds:
         raise ValueError(f"{technique} renders a Volume (a grid); this scene holds a TetMesh: "
-                         "use technique 'tetra' or 'particles'")
+                         "use technique 'tetra', 'particles' or 'splat'")
     if not scene.is_mesh and "volume" not in kinds:
         raise ValueError(f"{technique} renders a TetMesh; this scene holds a Volume: "
-                         "use raycast, slice2d, slice3d or particles")
+                         "use raycast, slice2d, slice3d, particles or splat")
     if modes is not None and scene.mode not in modes:
         raise ValueError(f"{technique} renders mode {' or '.join(repr(m) for m in modes)}, "
                          f"got mode {scene.mode!r}")

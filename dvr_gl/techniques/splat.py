@@ -20,6 +20,10 @@ farther away; the rest renormalised). Each splat is composited over what is behi
 with opacity ``1 - exp(-tau V_i F_i)`` and colour ``c(s_i)`` (the sample classified first,
 then reconstructed: pre-classification).
 
+Meshes: the samples are the mesh's points, each carrying its lumped volume (a quarter of
+every cell it is a corner of: the integral of its linear basis function), its kernel
+isotropic and ``radius`` times the mean length of the edges that meet there.
+
 Order: per view the samples are sorted by depth, back to front (float32 argsort), and
 drawn in that order (an index buffer); a splat counts only where its centre is ahead of
 the ray's start. Samples with zero opacity are not drawn. Samples are made once per
@@ -27,8 +31,9 @@ volume, transfer function and density.
 
 Options (same names in ``dvr_gl.reference.render``)
 ---------------------------------------------------
-density : int from 1 to 8 (default 1), samples per data spacing along each axis.
-radius : kernel standard deviation in sample spacings (default 0.4: the balance of holes
+density : int from 1 to 8 (default 1), samples per data spacing along each axis (grids only).
+radius : kernel standard deviation in sample spacings, or in mean edge lengths on a mesh
+    (default 0.4: the balance of holes
     and blur measured in the README).
 cutoff : truncation in standard deviations (default 3).
 target : "rgba32f" (default) | "rgba16f" | "rgba8": blending happens in the target.
@@ -49,7 +54,7 @@ from .particles import pixels_per_unit
 
 MODES = ("composite",)
 TAKES_STEP = False
-DATA = "volume"
+DATA = ("volume", "mesh")
 DEFAULT_RADIUS = 0.4
 DEFAULT_CUTOFF = 3.0
 ALPHA_CAP = 1.0 - 1e-6           # opacity 1 is infinite extinction
@@ -57,11 +62,14 @@ ALPHA_CAP = 1.0 - 1e-6           # opacity 1 is infinite extinction
 
 @dataclass
 class Splats:
-    """The drawn samples: ``points`` (N, 3) float32 relative to the volume's lower
-    corner, ``samples`` (N, 4) float32 (colour, extinction times cell volume), and the
-    sample spacing."""
+    """The drawn samples: ``points`` (N, 3) float32 relative to the data's lower corner,
+    ``samples`` (N, 4) float32 (colour, extinction times the sample's volume share),
+    ``scales`` (N,) float32 and ``spacing`` (3,): sample i's kernel has standard
+    deviation ``radius * spacing * scales[i]`` per axis (grids: the sample spacing, every
+    scale 1; meshes: spacing 1, the scale the point's mean edge length)."""
     points: np.ndarray
     samples: np.ndarray
+    scales: np.ndarray
     spacing: np.ndarray
 
     @property
@@ -82,6 +90,7 @@ class SplatPlan:
 
     @property
     def sigma(self):
+        """The kernel's standard deviations at scale 1 (each splat's times its scale)."""
         return self.radius * self.splats.spacing
 
     def kernel_uniforms(self):
@@ -120,8 +129,29 @@ def make_splats(volume, tf, density):
         samples.append(np.concatenate([tf.color(s).reshape(-1, 3), (tau * weight * cell)[:, None]],
                                       axis=1).astype(np.float32))
     if not points:
-        return Splats(np.zeros((0, 3), np.float32), np.zeros((0, 4), np.float32), spacing)
-    return Splats(np.concatenate(points), np.concatenate(samples), spacing)
+        return Splats(np.zeros((0, 3), np.float32), np.zeros((0, 4), np.float32), np.zeros(0, np.float32), spacing)
+    points = np.concatenate(points)
+    return Splats(points, np.concatenate(samples), np.ones(len(points), np.float32), spacing)
+
+
+def make_mesh_splats(mesh, tf):
+    """A tetrahedral mesh's classified points: each point's kernel carries its lumped
+    share of the volume (a quarter of every cell it is a corner of: the integral of its
+    linear basis function) and is as wide as the edges that meet there, on average."""
+    tets = mesh.tets
+    share = np.bincount(tets.ravel(), np.repeat(np.abs(mesh.signed_volumes()) / 4.0, 4), minlength=mesh.n_points)
+    pairs = tets[:, [0, 0, 0, 1, 1, 2, 1, 2, 3, 2, 3, 3]].reshape(-1, 2, 6).transpose(0, 2, 1).reshape(-1, 2)
+    length = np.linalg.norm(mesh.points[pairs[:, 0]] - mesh.points[pairs[:, 1]], axis=1)
+    ends = pairs.ravel()
+    total = np.bincount(ends, np.repeat(length, 2), minlength=mesh.n_points)
+    count = np.bincount(ends, minlength=mesh.n_points)
+    s = mesh.scalars
+    alpha = np.minimum(tf.opacity(s), ALPHA_CAP)
+    keep = (alpha > 0) & (share > 0) & (count > 0)
+    tau = -np.log1p(-alpha[keep]) / tf.unit_distance
+    samples = np.concatenate([tf.color(s[keep]).reshape(-1, 3), (tau * share[keep])[:, None]], axis=1)
+    return Splats((mesh.points[keep] - mesh.bounds[0]).astype(np.float32), samples.astype(np.float32),
+                  (total[keep] / count[keep]).astype(np.float32), np.ones(3))
 
 
 def back_to_front(scene, splats):
@@ -148,8 +178,13 @@ def make_plan(scene, step=None, *, density=1, radius=DEFAULT_RADIUS, cutoff=DEFA
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not (math.isfinite(value) and value > 0):
             raise ValueError(f"{name} must be a positive number, got {value!r}")
     check_target(target)
-    splats = tables.get(f"splats:{int(density)}", scene.volume, scene.tf,
-                        make=lambda volume, tf: make_splats(volume, tf, int(density)))
+    if scene.is_mesh:
+        if density != 1:
+            raise ValueError(f"density applies to grids (a mesh is splatted at its points), got density={density!r}")
+        splats = tables.get("splats:mesh", scene.volume, scene.tf, make=make_mesh_splats)
+    else:
+        splats = tables.get(f"splats:{int(density)}", scene.volume, scene.tf,
+                            make=lambda volume, tf: make_splats(volume, tf, int(density)))
     order = tables.get("splat_order", splats, scene.camera,
                        make=lambda s, camera: back_to_front(scene, s))
     defines = {"ORTHO": 1} if scene.camera.is_ortho else {}
@@ -187,11 +222,11 @@ class _SplatBuffers:
 
     def __init__(self, ctx, prog, splats):
         self.ctx = ctx
-        data = np.concatenate([splats.points, splats.samples], axis=1).astype(np.float32)
+        data = np.concatenate([splats.points, splats.samples, splats.scales[:, None]], axis=1).astype(np.float32)
         self.vbo = ctx.buffer(np.ascontiguousarray(data).tobytes())
         self.ibo = ctx.buffer(reserve=max(4 * splats.count, 4))
-        self.vao = ctx.vertex_array(prog, [(self.vbo, "3f 4f", "a_position", "a_sample")], index_buffer=self.ibo,
-                                    index_element_size=4)
+        self.vao = ctx.vertex_array(prog, [(self.vbo, "3f 4f 1f", "a_position", "a_sample", "a_scale")],
+                                    index_buffer=self.ibo, index_element_size=4)
         self.last = None
 
     def ordered(self, order):

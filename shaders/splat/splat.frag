@@ -15,10 +15,11 @@
 
 flat in vec3 v_center;
 flat in vec4 v_sample;
+flat in float v_scale;         // this kernel's standard deviations are sigma * v_scale
 
-uniform vec3 u_inv_var;        // 1 / sigma^2 per axis
+uniform vec3 u_inv_var;        // 1 / sigma^2 per axis, at scale 1
 uniform float u_cutoff2;       // cutoff^2
-uniform float u_norm;          // 1 / (2 pi sqrt(det) (1 - exp(-cutoff^2 / 2)))
+uniform float u_norm;          // 1 / (2 pi sqrt(det) (1 - exp(-cutoff^2 / 2))), at scale 1
 
 out vec4 frag_color;
 
@@ -26,15 +27,16 @@ void main() {
     vec3 origin, dir;
     pixelRay(origin, dir);
     vec3 q = origin - v_center;
-    float a = dot(dir * dir, u_inv_var);
-    float b = dot(dir * q, u_inv_var);
+    vec3 inv_var = u_inv_var / (v_scale * v_scale);
+    float a = dot(dir * dir, inv_var);
+    float b = dot(dir * q, inv_var);
     if (b >= 0.0) discard;                    // the kernel's centre is not ahead of the ray's start
     // the ray's squared distance in standard deviations, from the offset at its closest
     // approach (c - b^2 / a would cancel catastrophically for a distant eye)
     vec3 off = q - (b / a) * dir;
-    float m2 = dot(off * off, u_inv_var);
+    float m2 = dot(off * off, inv_var);
     if (m2 > u_cutoff2) discard;
-    float depth = v_sample.a * u_norm * inversesqrt(a) * exp(-0.5 * m2);
+    float depth = v_sample.a * u_norm / (v_scale * v_scale * v_scale) * inversesqrt(a) * exp(-0.5 * m2);
     float alpha = -expm1Accurate(-depth);
     frag_color = vec4(v_sample.rgb * alpha, alpha);
 }

@@ -5,7 +5,8 @@
 #include "common/sprite.glsl"
 
 in vec3 a_position;            // relative to the data's lower corner
-in vec4 a_sample;              // the sample's colour, and its extinction times the cell volume
+in vec4 a_sample;              // the sample's colour, and its extinction times its volume share
+in float a_scale;              // the kernel's size relative to u_reach and the standard deviations
 
 uniform mat4 u_view_proj;
 uniform vec3 u_eye;            // relative to the data's lower corner
@@ -15,10 +16,12 @@ uniform float u_pixels_per_unit;
 
 flat out vec3 v_center;
 flat out vec4 v_sample;
+flat out float v_scale;
 
 void main() {
     gl_Position = u_view_proj * vec4(a_position, 1.0);
-    gl_PointSize = spriteSize(a_position, u_reach, u_eye, u_forward, u_pixels_per_unit);
+    gl_PointSize = spriteSize(a_position, u_reach * a_scale, u_eye, u_forward, u_pixels_per_unit);
     v_center = a_position;
     v_sample = a_sample;
+    v_scale = a_scale;
 }
