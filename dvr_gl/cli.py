@@ -139,8 +139,8 @@ def add_render_options(r):
                         "{\"color\": [[s, r, g, b], ...], \"opacity\": [[s, a], ...], \"unit_distance\": u}; "
                         "default: auto (the data set's own for builtin inputs)")
     r.add_argument("--technique", default=None,
-                   help="rendering technique: raycast, slice2d, slice3d or splat for volumes, tetra for "
-                        "meshes, particles for both (default: raycast, or tetra for a mesh)")
+                   help="rendering technique: raycast, slice2d or slice3d for volumes, tetra for meshes, "
+                        "particles or splat for both (default: raycast, or tetra for a mesh)")
     r.add_argument("--scalars", metavar="NAME",
                    help="mesh inputs: the point array to render (default: the first scalar array)")
     r.add_argument("--sort", choices=SORTS,
@@ -206,7 +206,7 @@ TECHNIQUE_OPTIONS = {"interpolate": ("slice2d",), "proxy": ("slice3d",), "shells
 
 #: the techniques that render meshes (cell projection); the others render grid volumes
 MESH_TECHNIQUES = ("tetra",)
-GRID_TECHNIQUES = ("raycast", "slice2d", "slice3d", "splat")
+GRID_TECHNIQUES = ("raycast", "slice2d", "slice3d")
 
 # volume-only options (raw geometry and masking): given with a mesh INPUT, a usage error
 _VOLUME_OPTIONS = (("spacing", "--spacing"), ("origin", "--origin"), ("mask_nonfinite", "--mask-nonfinite"))

@@ -371,7 +371,7 @@ def test_mesh_input_picks_tetra_and_takes_its_options(tiny_mesh, tiny):
 @pytest.mark.parametrize("name, extra, option, fragment", [
     ("tiny.vtu", ["--technique", "raycast"], "--technique", "raycast renders grid volumes"),
     ("tiny.vtu", ["--technique", "slice3d"], "--technique", "use --technique tetra"),
-    ("tiny.npy", ["--technique", "tetra"], "--technique", "use --technique raycast, slice2d, slice3d or splat"),
+    ("tiny.npy", ["--technique", "tetra"], "--technique", "use --technique raycast, slice2d or slice3d"),
     ("tiny.npy", ["--scalars", "ramp"], "--scalars", "grid volume"),
     ("tiny.npy", ["--sort", "mpvo"], "--sort", "applies to --technique tetra only, not raycast"),
     ("tiny.vtu", ["--sort", "bubble"], "argument --sort", "'bubble'"),
@@ -537,3 +537,14 @@ def test_render_splat_options(renderer, tiny, capsys):
         assert code == 2 and message in err, err
     code, _, err = _run(["render", d / "tiny.npy", "--density", "2", "--out", out], capsys)
     assert code == 2 and "--density: applies to --technique splat only, not raycast" in err
+
+
+def test_render_splat_on_a_mesh(renderer, tiny_mesh, capsys):
+    d, mesh = tiny_mesh
+    out = d / "splat_mesh.png"
+    code, stdout, err = _run(["render", d / "tiny.vtu", "--technique", "splat", "--size", "24x24", "--out", out],
+                             capsys)
+    assert code == 0, err
+    assert _png(out)[1][..., 3].max() > 0
+    code, _, err = _run(["render", d / "tiny.vtu", "--technique", "splat", "--density", "2", "--out", out], capsys)
+    assert code != 0 and "density applies to grids" in err

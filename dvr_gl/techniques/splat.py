@@ -33,8 +33,7 @@ Options (same names in ``dvr_gl.reference.render``)
 ---------------------------------------------------
 density : int from 1 to 8 (default 1), samples per data spacing along each axis (grids only).
 radius : kernel standard deviation in sample spacings, or in mean edge lengths on a mesh
-    (default 0.4: the balance of holes
-    and blur measured in the README).
+    (default 0.4: the balance of holes and blur measured in the README).
 cutoff : truncation in standard deviations (default 3).
 target : "rgba32f" (default) | "rgba16f" | "rgba8": blending happens in the target.
 """
