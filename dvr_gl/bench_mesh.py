@@ -26,7 +26,6 @@ not installed. ``t/VTK`` and ``err/VTK`` divide by VTK's row of the same data se
 
 from __future__ import annotations
 
-import math
 import os
 import statistics
 import sys
@@ -37,7 +36,7 @@ import numpy as np
 from . import metrics
 from .bench import DEFAULT_DATA_DIR, _fmt, _machine, error_axes, figure_bytes, write_results
 from .progress import Progress
-from .scene import Camera, Scene, TetMesh, TransferFunction, default_camera
+from .scene import Scene, TetMesh, TransferFunction, default_camera
 
 MESHES = {  # name -> (file under the shared data folder, scalar array)
     "bluntfin": (os.path.join("nasa_bluntfin", "bluntfin_tets.npz"), "Density"),

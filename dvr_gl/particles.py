@@ -71,8 +71,11 @@ class ParticleSet:
 
 def extinction(tf, s):
     """tau(s) = -ln(1 - alpha(s)) / unit_distance, alpha capped at ALPHA_CAP."""
-    alpha = np.minimum(tf.opacity(np.asarray(s, np.float64)), ALPHA_CAP)
-    return -np.log1p(-alpha) / tf.unit_distance
+    return _tau(tf.opacity(np.asarray(s, np.float64)), tf)
+
+
+def _tau(alpha, tf):
+    return -np.log1p(-np.minimum(alpha, ALPHA_CAP)) / tf.unit_distance
 
 
 def max_extinction(tf, lo, hi):
@@ -82,7 +85,7 @@ def max_extinction(tf, lo, hi):
     for s, a in tf.opacity_points:
         inside = (lo < s) & (s < hi)
         alpha = np.where(inside, np.maximum(alpha, a), alpha)
-    return -np.log1p(-np.minimum(alpha, ALPHA_CAP)) / tf.unit_distance
+    return _tau(alpha, tf)
 
 
 def default_radius(scene):

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import dvr_gl
-from dvr_gl import Camera, Scene, TetMesh, TransferFunction, Volume, particles as pbvr
+from dvr_gl import Camera, Scene, TransferFunction, Volume, particles as pbvr
 from dvr_gl import data as bundled
 from dvr_gl.techniques import particles as technique
 

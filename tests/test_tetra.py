@@ -9,8 +9,6 @@ tau * dL <= 2 * 2e-6; over the at most 12 segments a ray meets in these meshes t
 bound is 12 * (4e-6 + 3e-7) ~ 5e-5; we assert 1e-4 on the largest channel error.
 """
 
-import math
-
 import numpy as np
 import pytest
 

@@ -105,11 +105,7 @@ def open_viewer(display):
         return v
 
     yield make
-    for v in made:
-        if v.window is not None:
-            with current(v.ctx):
-                assert v.ctx.error == "GL_NO_ERROR"
-        v.close()
+    _close_checked(made)
 
 
 def head_viewer(open_viewer, *extra):
@@ -127,6 +123,15 @@ def drag(v, start, end, button=MOUSE_LEFT, mods=0, steps=4):
 def press(v, char_or_key, mods=0):
     key = key_code(char_or_key) if isinstance(char_or_key, str) else char_or_key
     v.on_key(key, PRESS, mods)
+
+
+def _close_checked(viewers):
+    """Close the viewers a fixture opened, each first checked for GL errors."""
+    for v in viewers:
+        if v.window is not None:
+            with current(v.ctx):
+                assert v.ctx.error == "GL_NO_ERROR"
+        v.close()
 
 
 def png(path):
@@ -790,11 +795,7 @@ def mesh_viewer(display):
         return v
 
     yield make
-    for v in made:
-        if v.window is not None:
-            with current(v.ctx):
-                assert v.ctx.error == "GL_NO_ERROR"
-        v.close()
+    _close_checked(made)
 
 
 def _tetra():

@@ -11,10 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..techniques.common import data_projection
-from ..techniques.particles import pixels_per_unit
-
-_PAIRS = 1 << 21     # (splat, pixel) candidates per batch
+from .sprites import sprite_pixel_pairs
 
 
 def render_plan(plan, lut_exact=False):
@@ -22,40 +19,16 @@ def render_plan(plan, lut_exact=False):
     the common interface: the samples are classified with the exact TF anyway."""
     scene = plan.scene
     W, H = scene.width, scene.height
-    cam = scene.camera
-    lo = scene.volume.bounds[0]
     order = plan.order
     centres = plan.splats.points[order].astype(np.float64)
     samples = plan.splats.samples[order].astype(np.float64)
     scales = plan.splats.scales[order].astype(np.float64)
-    sigma = plan.sigma
-    inv_var = 1.0 / sigma ** 2
+    inv_var = 1.0 / plan.sigma ** 2
     u = plan.kernel_uniforms()
-    clip = np.concatenate([centres, np.ones((len(centres), 1))], axis=1) @ data_projection(scene)
-    w = clip[:, 3]
-    inside = np.all(np.abs(clip[:, :3]) <= w[:, None], axis=1) & (w > 0)   # GL clips points by centre
-    rank = np.flatnonzero(inside)                                           # draw position
-    cx = (clip[rank, 0] / w[rank] + 1) * 0.5 * W
-    cy = (1 - clip[rank, 1] / w[rank]) * 0.5 * H
-    reach = plan.cutoff * float(sigma.max()) * scales[rank]
-    eye = cam.eye - lo
-    depth = 1.0 if cam.is_ortho else np.maximum((centres[rank] - eye) @ cam.forward - reach, 1e-6)
-    half = np.ceil(3.0 * reach * pixels_per_unit(scene) / depth + 2.0).astype(np.int64) * np.ones(rank.size, np.int64)
-    x0 = np.clip(np.floor(cx).astype(np.int64) - half, 0, W - 1)
-    x1 = np.clip(np.floor(cx).astype(np.int64) + half, 0, W - 1)
-    y0 = np.clip(np.floor(cy).astype(np.int64) - half, 0, H - 1)
-    y1 = np.clip(np.floor(cy).astype(np.int64) + half, 0, H - 1)
-    origins, dirs = cam.rays(W, H)
-    origins, dirs = origins.reshape(-1, 3) - lo, dirs.reshape(-1, 3)
-    nx, ny = x1 - x0 + 1, y1 - y0 + 1
-    counts = nx * ny
+    # draw position in the plan's order of each splat GL keeps
+    rank, origins, dirs, chunks = sprite_pixel_pairs(scene, centres, u["u_reach"] * scales)
     pixels, ranks, alphas, colors = [], [], [], []
-    start = 0
-    while start < rank.size:
-        stop = min(rank.size, start + max(1, int(np.searchsorted(np.cumsum(counts[start:]), _PAIRS))))
-        ids = np.repeat(np.arange(start, stop), counts[start:stop])
-        k = np.arange(ids.size) - np.repeat(np.cumsum(counts[start:stop]) - counts[start:stop], counts[start:stop])
-        pixel = (y0[ids] + k // nx[ids]) * W + x0[ids] + k % nx[ids]
+    for ids, pixel in chunks:
         q = origins[pixel] - centres[rank[ids]]
         d = dirs[pixel]
         scale = scales[rank[ids]]
@@ -71,7 +44,6 @@ def render_plan(plan, lut_exact=False):
         ranks.append(rank[ids][hit])
         alphas.append(alpha[hit])
         colors.append(samples[rank[ids][hit], :3] * alpha[hit, None])
-        start = stop
     out = np.zeros((H * W, 4))
     if not pixels:
         return out.reshape(H, W, 4)

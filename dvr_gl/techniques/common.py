@@ -132,6 +132,15 @@ def eye_view_projection(scene, near, far):
     return view @ proj
 
 
+def cleared_target(renderer, scene, target):
+    """The renderer's float target for this image size and format, bound and cleared to
+    transparent black: where every technique draws."""
+    fbo = renderer.target(scene.width, scene.height, TARGETS[target])
+    fbo.use()
+    fbo.clear(0.0, 0.0, 0.0, 0.0)
+    return fbo
+
+
 def knot_uniforms(prog, knots, capacity):
     """The transfer function's knots (a SegmentKnots) as the uniform arrays of
     shaders/common/linear_segment.glsl, padded to the program's KNOT_CAPACITY."""

@@ -36,7 +36,7 @@ from .. import particles as pbvr
 from ..cache import TableCache
 from ..progress import Progress
 from ..scene import Scene
-from .common import TARGETS, SizedTarget, bind, camera_uniforms, check_scene, check_target, data_projection
+from .common import cleared_target, SizedTarget, bind, camera_uniforms, check_scene, check_target, data_projection
 
 MODES = ("composite",)
 PROGRESS_CANDIDATES = 5_000_000    # generation this large (all sets) shows a progress bar
@@ -129,9 +129,7 @@ def draw(renderer, plan):
     """Render the plan into the renderer's target; returns that framebuffer."""
     ctx = renderer.ctx
     scene = plan.scene
-    fbo = renderer.target(scene.width, scene.height, TARGETS[plan.target])
-    fbo.use()
-    fbo.clear(0.0, 0.0, 0.0, 0.0)
+    fbo = cleared_target(renderer, scene, plan.target)
     if plan.count == 0:
         return fbo
     scratch = renderer.resource("particles_scratch", make=lambda: SizedTarget(ctx, depth=True), capacity=1).get(

@@ -54,7 +54,7 @@ from ..cache import TableCache
 from ..reference.shading import gradient_epsilon
 from ..scene import Scene
 from ..transfer import LookupTable
-from .common import (TARGETS, add_optional_inputs, bind, box_proxy, camera_uniforms, check_flag, check_scene,
+from .common import (cleared_target, add_optional_inputs, bind, box_proxy, camera_uniforms, check_flag, check_scene,
                      check_step, check_target, preintegration_table, tf_uniforms, volume_uniforms)
 
 BRICK = 8            # brick edge in cells, for empty-space skipping
@@ -245,9 +245,7 @@ def draw(renderer, plan):
     kind, view_proj = box_proxy(scene)
     prog["u_view_proj"].write(view_proj.astype("f4").tobytes())
     vao = renderer.proxy_vao(prog, kind)
-    fbo = renderer.target(scene.width, scene.height, TARGETS[plan.target])
-    fbo.use()
-    fbo.clear(0.0, 0.0, 0.0, 0.0)
+    fbo = cleared_target(renderer, scene, plan.target)
     ctx.disable(ctx.BLEND | ctx.DEPTH_TEST)
     if kind == "box":
         ctx.enable(ctx.CULL_FACE)

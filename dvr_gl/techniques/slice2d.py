@@ -49,7 +49,7 @@ import numpy as np
 from ..cache import TableCache
 from ..scene import Scene
 from ..transfer import LookupTable
-from .common import (TARGETS, add_optional_inputs, bind, box_depth_range, camera_uniforms, check_flag,
+from .common import (cleared_target, add_optional_inputs, bind, box_depth_range, camera_uniforms, check_flag,
                      check_scene, check_target, eye_view_projection, preintegration_table, tf_uniforms,
                      volume_uniforms)
 
@@ -170,9 +170,7 @@ def draw(renderer, plan):
         view_proj = eye_view_projection(scene, _near_plane(scene), max(dmax, 0.0) * 1.01 + margin)
     prog["u_view_proj"].write(view_proj.astype("f4").tobytes())
 
-    fbo = renderer.target(scene.width, scene.height, TARGETS[plan.target])
-    fbo.use()
-    fbo.clear(0.0, 0.0, 0.0, 0.0)
+    fbo = cleared_target(renderer, scene, plan.target)
     positions, indices = slice_quads(plan)
     ctx.disable(ctx.DEPTH_TEST | ctx.CULL_FACE)
     ctx.enable(ctx.BLEND)

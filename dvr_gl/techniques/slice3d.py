@@ -52,7 +52,7 @@ from ..cache import TableCache
 from ..scene import Scene
 from ..transfer import LookupTable
 from . import proxy as proxy_geometry
-from .common import (TARGETS, add_optional_inputs, bind, box_proxy, camera_uniforms, check_flag, check_scene,
+from .common import (cleared_target, add_optional_inputs, bind, box_proxy, camera_uniforms, check_flag, check_scene,
                      check_step, check_target, eye_view_projection, preintegration_table, tf_uniforms,
                      volume_uniforms)
 
@@ -171,9 +171,7 @@ def draw(renderer, plan):
     add_optional_inputs(renderer, plan, textures, uniforms)
     bind(prog, textures, uniforms)
 
-    fbo = renderer.target(scene.width, scene.height, TARGETS[plan.target])
-    fbo.use()
-    fbo.clear(0.0, 0.0, 0.0, 0.0)
+    fbo = cleared_target(renderer, scene, plan.target)
     if plan.count == 0:
         return fbo
     ctx.disable(ctx.DEPTH_TEST | ctx.CULL_FACE)

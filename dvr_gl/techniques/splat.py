@@ -48,7 +48,8 @@ import numpy as np
 from ..cache import TableCache
 from ..reference.common import cell_is_valid, trilinear
 from ..scene import Scene
-from .common import TARGETS, bind, camera_uniforms, check_scene, check_target, data_projection
+from .common import cleared_target, bind, camera_uniforms, check_scene, check_target, data_projection
+from ..particles import extinction
 from .particles import pixels_per_unit
 
 MODES = ("composite",)
@@ -56,7 +57,6 @@ TAKES_STEP = False
 DATA = ("volume", "mesh")
 DEFAULT_RADIUS = 0.4
 DEFAULT_CUTOFF = 3.0
-ALPHA_CAP = 1.0 - 1e-6           # opacity 1 is infinite extinction
 
 
 @dataclass
@@ -113,14 +113,13 @@ def make_splats(volume, tf, density):
     for k in range(n[2]):
         idx = np.stack([xx.ravel(), yy.ravel(), np.full(xx.size, k / density)], axis=1)   # x, y, z indices
         s = trilinear(values, idx)
-        alpha = np.minimum(tf.opacity(s), ALPHA_CAP)
-        keep = alpha > 0
+        tau = extinction(tf, s)
+        keep = tau > 0
         if volume.cell_valid is not None:
             keep &= cell_is_valid(volume, idx)
         if not keep.any():
             continue
-        idx, s, alpha = idx[keep], s[keep], alpha[keep]
-        tau = -np.log1p(-alpha) / tf.unit_distance
+        idx, s, tau = idx[keep], s[keep], tau[keep]
         # trapezoid weights: a sample on a face of the box stands for half a cell along
         # that axis, so the kernels carry the trapezoid rule's integral of tau over the box
         weight = np.prod(np.where((idx == 0) | (idx == dims - 1), 0.5, 1.0), axis=1)
@@ -145,9 +144,9 @@ def make_mesh_splats(mesh, tf):
     total = np.bincount(ends, np.repeat(length, 2), minlength=mesh.n_points)
     count = np.bincount(ends, minlength=mesh.n_points)
     s = mesh.scalars
-    alpha = np.minimum(tf.opacity(s), ALPHA_CAP)
-    keep = (alpha > 0) & (share > 0) & (count > 0)
-    tau = -np.log1p(-alpha[keep]) / tf.unit_distance
+    tau = extinction(tf, s)
+    keep = (tau > 0) & (share > 0) & (count > 0)
+    tau = tau[keep]
     samples = np.concatenate([tf.color(s[keep]).reshape(-1, 3), (tau * share[keep])[:, None]], axis=1)
     return Splats((mesh.points[keep] - mesh.bounds[0]).astype(np.float32), samples.astype(np.float32),
                   (total[keep] / count[keep]).astype(np.float32), np.ones(3))
@@ -195,9 +194,7 @@ def draw(renderer, plan):
     """Render the plan into the renderer's target; returns that framebuffer."""
     ctx = renderer.ctx
     scene = plan.scene
-    fbo = renderer.target(scene.width, scene.height, TARGETS[plan.target])
-    fbo.use()
-    fbo.clear(0.0, 0.0, 0.0, 0.0)
+    fbo = cleared_target(renderer, scene, plan.target)
     if plan.splats.count == 0:
         return fbo
     prog = renderer.programs.get("splat/splat.vert", "splat/splat.frag", plan.defines)

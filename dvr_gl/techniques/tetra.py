@@ -45,7 +45,7 @@ from ..cache import TableCache
 from ..mesh import LOCAL_FACES, Order, centroid_order, mpvo_order, topology, visible_cells
 from ..reference.linear_segment import SegmentKnots
 from ..scene import Scene
-from .common import TARGETS, SizedTarget, bind, camera_uniforms, check_scene, check_target, data_projection, knot_uniforms
+from .common import cleared_target, SizedTarget, bind, camera_uniforms, check_scene, check_target, data_projection, knot_uniforms
 
 MODES = ("composite", "mip", "minip", "average")
 TAKES_STEP = False
@@ -210,9 +210,7 @@ def draw(renderer, plan):
     scene = plan.scene
     mesh = scene.volume
     composite = scene.mode == "composite"
-    fbo = renderer.target(scene.width, scene.height, TARGETS[plan.target])
-    fbo.use()
-    fbo.clear(0.0, 0.0, 0.0, 0.0)
+    fbo = cleared_target(renderer, scene, plan.target)
     if plan.draw.size == 0:
         return fbo
     if not composite:
