@@ -33,6 +33,7 @@ from .progress import Progress
 from .scene import Scene, default_camera
 
 DATASETS = ("head", "chest", "bluntfin")
+MARKERS = (("splat density 1", "v"), ("splat density 2", "^"), ("VTK", "D"))   # the rest: squares
 VIEWS = {"head": (30.0, 15.0), "chest": (30.0, 15.0), "bluntfin": (30.0, 20.0)}     # azimuth, elevation
 CSV_FIELDS = ["dataset", "renderer", "repetitions", "width", "particles", "generate_ms", "generate_per_s",
               "draw_ms", "drawn_per_s", "ms_median", "error_size", "rmse", "max_abs"]
@@ -205,8 +206,10 @@ def figure_png(rows, info) -> bytes:
                             xytext=(4, 4), fontsize=7, color=color)
         for r in rows:
             if r["dataset"] == name and r["renderer"] != "dvr_gl particles":
-                ax.scatter([r["ms_median"]], [max(r["rmse"], 1e-12)], marker="s", color=color,
-                           label=f"{name}: {r['renderer'].split()[-1]}")
+                label = r["renderer"].replace("dvr_gl ", "")
+                marker = next((m for key, m in MARKERS if key in label), "s")
+                ax.scatter([r["ms_median"]], [max(r["rmse"], 1e-12)], marker=marker, color=color,
+                           label=f"{name}: {label}")
     error_axes(ax, f"median time per frame (ms, {info.get('size')}x{info.get('size')})",
                f"RMSE against exact ({info.get('error_size')}x{info.get('error_size')})")
     return figure_bytes(fig)
