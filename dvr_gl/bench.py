@@ -571,8 +571,10 @@ def add_arguments(parser):
     parser.add_argument("--no-vtk", action="store_true", help="leave VTK out")
     parser.add_argument("--textures", action="store_true",
                         help="also measure trilinear sampling throughput of float32, float16 and unorm8 textures")
-    parser.add_argument("--suite", choices=("peer", "slicing", "mesh", "particles"), default="peer",
-                        help="peer: the ray caster beside VTK (default); slicing: slice2d (k = 0, 1, 3), "
+    parser.add_argument("--suite", choices=("peer", "slicing", "mesh", "particles", "all"), default="peer",
+                        help="all: every technique over its quality parameter on generated and real "
+                             "scenes, one report (--datasets ml,head,ball,bluntfin; --out DIR writes "
+                             "all.csv/.json/.md/.png and contact.png); peer: the ray caster beside VTK (default); slicing: slice2d (k = 0, 1, 3), "
                              "slice3d (cpu and vertex proxies) and the ray caster at equal sample "
                              "distance, each with and without pre-integration; mesh: projected "
                              "tetrahedra (MPVO and centroid sort) beside VTK's on the NASA meshes "
@@ -592,7 +594,7 @@ def add_arguments(parser):
 
 def run_bench(args) -> int:
     if args.size is None:
-        args.size = 64 if args.quick else 512
+        args.size = (128 if args.suite == "all" else 64) if args.quick else 512
     if args.repeats is None:
         args.repeats = 2 if args.quick else 5
     if args.size < 1 or args.repeats < 1:
@@ -607,8 +609,11 @@ def run_bench(args) -> int:
         print(f"dvr-gl bench: --steps must be positive, got {args.steps!r}", file=sys.stderr)
         return 2
     if args.datasets is None:
-        args.datasets = {"mesh": "bluntfin,combustor,loxpost,ball", "particles": "head,bluntfin"}.get(
-            args.suite, "chest,head")
+        args.datasets = {"mesh": "bluntfin,combustor,loxpost,ball", "particles": "head,bluntfin",
+                         "all": "ml,ball" if args.quick else "ml,head,ball,bluntfin"}.get(args.suite, "chest,head")
+    if args.suite == "all":
+        from .bench_all import run_all_bench
+        return run_all_bench(args)
     if args.suite == "particles":
         from .bench_particles import parse_repetitions, run_particles_bench
         if args.error_size is None:

@@ -634,6 +634,20 @@ def _load_bench(argv):
 
 def main(argv=None) -> int:
     """Run the command line; returns the exit status (0, 1, 2 or 130)."""
+    try:
+        return _main(argv)
+    except BrokenPipeError:
+        # The reader of stdout went away (``dvr-gl info | head -1``): not an error. Files
+        # are written before anything is printed about them, and atomically, so nothing
+        # is half-written; stdout goes to /dev/null so that the interpreter's final flush
+        # stays quiet.
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+        return 0
+
+
+def _main(argv):
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv[:1] == ["view"]:
         # the viewer parses its own arguments (argparse's REMAINDER would reject options
@@ -687,6 +701,8 @@ def _guarded(command, func, args, debug):
         if debug:
             raise
         return _fail(command, str(e).replace("pass mask_nonfinite=True", "pass --mask-nonfinite"), 2)
+    except BrokenPipeError:
+        raise  # the reader went away: main() ends quietly
     except (RuntimeError, OSError) as e:  # no GL context, a failed frame, a full disk
         if debug:
             raise

@@ -836,25 +836,34 @@ def to_png_array(image, background=None):
         raise InputError("image", f"expected shape (H, W, 4) premultiplied RGBA, got {image.shape}")
     if image.dtype.kind != "f":
         raise InputError("image", f"expected floats in [0, 1], got dtype {image.dtype}")
-    img = image.astype(np.float64)
-    bad = ~np.isfinite(img)
-    if bad.any():
-        idx = tuple(int(i) for i in np.argwhere(bad)[0])
-        raise InputError("image", f"has non-finite values (first at (row, col, channel) {idx}: {image[idx]!r})")
-    img = np.clip(img, 0.0, 1.0)
+    bg = None
+    if background is not None:
+        bg = np.array(_triplet(background, "background"), dtype=np.float64)
+        if np.any(bg < 0) or np.any(bg > 1):
+            raise InputError("background", f"components must lie in [0, 1], got {tuple(bg.tolist())}")
+    height, width = image.shape[:2]
+    out = np.empty((height, width, 4 if bg is None else 3), np.uint8)
+    rows = max(1, (1 << 22) // (width * 4))  # float64 work in blocks of ~32 MiB: posters fit in memory
+    for start in range(0, height, rows):
+        block = image[start:start + rows]
+        if not np.isfinite(block).all():
+            idx = tuple(int(i) for i in np.argwhere(~np.isfinite(block))[0])
+            idx = (idx[0] + start,) + idx[1:]
+            raise InputError("image", f"has non-finite values (first at (row, col, channel) {idx}: {image[idx]!r})")
+        out[start:start + rows] = _png_block(np.clip(block.astype(np.float64), 0.0, 1.0), bg)
+    return out
+
+
+def _png_block(img, bg):
     colour, alpha = img[..., :3], img[..., 3:]
-    if background is None:
+    if bg is None:
         alpha8 = np.rint(alpha * 255)
         with np.errstate(divide="ignore", invalid="ignore"):
             straight = np.where(alpha > 0, colour / alpha, 0.0)
         rgb8 = np.rint(np.clip(straight, 0.0, 1.0) * 255)
         rgb8[np.broadcast_to(alpha8 == 0, rgb8.shape)] = 0
-        return np.concatenate([rgb8, alpha8], axis=-1).astype(np.uint8)
-    bg = np.array(_triplet(background, "background"), dtype=np.float64)
-    if np.any(bg < 0) or np.any(bg > 1):
-        raise InputError("background", f"components must lie in [0, 1], got {tuple(bg.tolist())}")
-    out = colour + (1.0 - alpha) * bg
-    return np.rint(np.clip(out, 0.0, 1.0) * 255).astype(np.uint8)
+        return np.concatenate([rgb8, alpha8], axis=-1)
+    return np.rint(np.clip(colour + (1.0 - alpha) * bg, 0.0, 1.0) * 255)
 
 
 def save_png(path, image, background=None):

@@ -4,10 +4,14 @@ scenes need (made on first use, kept while the scene's objects live, never per f
 from __future__ import annotations
 
 
+import copy
+import math
+
 import numpy as np
 
-from .gl.context import current, describe, idle_framebuffer, shared_context
+from .gl.context import context_lost, current, describe, idle_framebuffer, shared_context
 from .gl.programs import ProgramCache
+from .progress import Progress
 from .cache import LRU, IdentityKey as _Key, TableCache
 from .techniques import get_technique
 
@@ -25,14 +29,26 @@ class Renderer:
     does not nest with the renderer's own).
     """
 
-    def __init__(self, backend="auto", ctx=None):
+    def __init__(self, backend="auto", ctx=None, max_tile=None):
         """``backend``: "auto" (EGL, then OSMesa), "egl" or "osmesa": a headless context
         shared by the process. ``ctx``: render in this moderngl context instead (a
-        window's, as the viewer does); the caller keeps it current and owns it."""
+        window's, as the viewer does); the caller keeps it current and owns it.
+        ``max_tile``: the largest side in pixels of one GL target (default: the GL limits,
+        at most DEFAULT_MAX_TILE); larger images are rendered in tiles."""
+        if max_tile is not None and (isinstance(max_tile, bool) or not isinstance(max_tile, (int, np.integer))
+                                     or max_tile < 16):
+            raise ValueError(f"max_tile must be an integer >= 16 (pixels), got {max_tile!r}")
+        self._max_tile = None if max_tile is None else int(max_tile)
+        self._requested = backend
         if ctx is not None:
             self.ctx, self.backend = ctx, "window"
         else:
             self.ctx, self.backend = shared_context(backend)
+        self._released = False
+        self._new_gpu_state()
+
+    def _new_gpu_state(self):
+        """Empty caches of GPU objects for ``self.ctx``."""
         self.programs = ProgramCache(self.ctx)
         self.created = []  # a log of ("texture kind", shape) for every texture made
         self._volumes = LRU(2)
@@ -48,7 +64,6 @@ class Renderer:
         self._vaos = {}
         self.tables = TableCache()
         self._resources = {}  # kind -> LRU: what techniques keep on the GPU (see resource)
-        self._released = False
         self._idle_fbo = idle_framebuffer(self.ctx)  # bound before any target is released
 
     # -- lifetime ---------------------------------------------------------------------
@@ -58,10 +73,20 @@ class Renderer:
     def __exit__(self, *exc):
         self.release()
 
+    def _revive(self):
+        """If another library destroyed the shared context (``gl.context.context_lost``),
+        move to a new one: the GPU objects died with the old context and are made again
+        on demand, so the renderer goes on giving the same images."""
+        if self.backend != "window" and not self._released and context_lost(self.ctx):
+            self.ctx, self.backend = shared_context(self._requested)
+            self._new_gpu_state()
+
     def release(self):
         if self._released:
             return
         self._released = True
+        if context_lost(self.ctx):  # its objects are gone already
+            return
         with current(self.ctx):
             for cache in (self._volumes, self._tfs, self._occupancy, self._masks, self._targets, self._stacks,
                           self._preint, *self._resources.values()):
@@ -75,20 +100,72 @@ class Renderer:
         # gl.context.shared_context).
 
     def info(self) -> dict:
+        self._revive()
         with current(self.ctx):  # another library (VTK) may have made its own context current
             return dict(describe(self.ctx), backend=self.backend)
 
     # -- rendering --------------------------------------------------------------------
     def render(self, scene, technique="raycast", step=None, **options):
-        """Render ``scene``; see the technique's module for its options."""
+        """Render ``scene``; see the technique's module for its options. Images larger
+        than one GL target (``max_tile``) are rendered in tiles, each a window of the
+        same camera, into one array: the same pixels as a single render would give."""
+        self._revive()
         with current(self.ctx):
-            fbo = self._draw(scene, technique, step, options)
-            return self.read_target(fbo, scene.width, scene.height)
+            edge = self.max_tile
+            if scene.width <= edge and scene.height <= edge:
+                fbo = self._draw(scene, technique, step, options)
+                return self.read_target(fbo, scene.width, scene.height)
+            check_image_memory(scene.width, scene.height)
+            image = np.empty((scene.height, scene.width, 4), np.float32)
+            margin = self._tile_margin(technique)
+            if edge - 2 * margin < 16:
+                raise ValueError(f"max_tile {edge} leaves no room for the {margin}-pixel margin that "
+                                 f"{technique}'s point sprites need on each side of a tile")
+            parts = tiles(scene.width, scene.height, edge - 2 * margin)
+            progress = Progress(len(parts))
+            for x, y, w, h in parts:
+                # point sprites are clipped by their centres: a margin of the largest
+                # sprite's half side keeps those centred just outside the tile
+                x0, y0 = max(x - margin, 0), max(y - margin, 0)
+                x1, y1 = min(x + w + margin, scene.width), min(y + h + margin, scene.height)
+                part = copy.copy(scene)
+                part.tile = (x0, y0, x1 - x0, y1 - y0)
+                fbo = self._draw(part, technique, step, options)
+                pixels = self.read_target(fbo, x1 - x0, y1 - y0)[::-1]  # rows bottom-up, as GL
+                inner = pixels[y - y0:y - y0 + h, x - x0:x - x0 + w]
+                image[scene.height - y - h:scene.height - y, x:x + w] = inner[::-1]
+                progress.advance(f"{technique} {scene.width}x{scene.height} in tiles")
+            progress.close()
+            return image
+
+    @property
+    def max_tile(self):
+        """The largest side of one render target: GL's texture, renderbuffer and viewport
+        limits, and DEFAULT_MAX_TILE (or the ``max_tile`` given)."""
+        if self._max_tile is None:
+            with current(self.ctx):
+                info = self.ctx.info
+            limits = [info.get("GL_MAX_TEXTURE_SIZE"), info.get("GL_MAX_RENDERBUFFER_SIZE"),
+                      *(info.get("GL_MAX_VIEWPORT_DIMS") or ())]
+            self._max_tile = min([DEFAULT_MAX_TILE] + [int(v) for v in limits if v])
+        return self._max_tile
+
+    def _tile_margin(self, technique):
+        if not getattr(get_technique(technique), "POINT_SPRITES", False):
+            return 0
+        with current(self.ctx):
+            largest = self.ctx.info.get("GL_POINT_SIZE_RANGE", (1.0, 256.0))[1]
+        return int(math.ceil(largest / 2)) + 1
 
     def render_target(self, scene, technique="raycast", step=None, **options):
         """Render into the renderer's float target and return that framebuffer, without
         reading it back (the viewer draws its colour attachment to the window). The
-        framebuffer is reused by the next render of the same size and format."""
+        framebuffer is reused by the next render of the same size and format. The image
+        must fit one target (``max_tile``)."""
+        self._revive()
+        if max(scene.width, scene.height) > self.max_tile:
+            raise ValueError(f"width x height must be at most {self.max_tile} pixels a side for render_target "
+                             f"(one GL target), got {scene.width}x{scene.height}; render() tiles larger images")
         with current(self.ctx):
             return self._draw(scene, technique, step, options)
 
@@ -233,6 +310,45 @@ class Renderer:
         entry[1].write(raw)
         entry[2].vertices = len(positions)
         return entry[2]
+
+
+DEFAULT_MAX_TILE = 4096  # a 4096^2 RGBA32F target is 256 MiB
+
+
+def tiles(width, height, edge):
+    """(x, y, w, h) tiles of at most ``edge`` pixels a side covering the image, y from the
+    bottom; equal-sized where they can be, so that all but a few targets are reused."""
+    nx, ny = -(-width // edge), -(-height // edge)
+    xs = np.linspace(0, width, nx + 1).round().astype(int)
+    ys = np.linspace(0, height, ny + 1).round().astype(int)
+    return [(int(xs[i]), int(ys[j]), int(xs[i + 1] - xs[i]), int(ys[j + 1] - ys[j]))
+            for j in range(ny) for i in range(nx)]
+
+
+class ImageTooLarge(ValueError):
+    """The image would not fit in memory."""
+
+
+def available_memory():
+    """Bytes of memory available to this process (Linux's MemAvailable), or None."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
+
+
+def check_image_memory(width, height, copies=1):
+    """Raise ImageTooLarge, naming the size, when ``copies`` float32 RGBA images of this
+    size would not fit in the memory available."""
+    need = width * height * 16 * copies
+    have = available_memory()
+    if have is not None and need > have:
+        raise ImageTooLarge(f"width x height {width}x{height}: the float32 RGBA image needs {need / 2**30:.1f} GiB "
+                            f"and {have / 2**30:.1f} GiB of memory is available; render a smaller image")
 
 
 class _Target:

@@ -21,7 +21,7 @@ import numpy as np
 
 SUPPORTED_DTYPES = (np.uint8, np.uint16, np.int16, np.float32, np.float64)
 MODES = ("composite", "mip", "minip", "average", "isosurface")
-MAX_IMAGE_SIDE = 16384
+MAX_IMAGE_SIDE = 65536  # larger than one GL target: rendered in tiles
 
 
 def _vector3(name, value, *, positive=False):
@@ -468,6 +468,21 @@ class Scene:
         self.iso_value = iso_value
         self.shading = bool(shading)
         self.phong = phong
+
+    # The part of the image a render covers, (x, y, width, height) in pixels with y from
+    # the bottom (GL window coordinates); None is the whole image. Set by the Renderer on
+    # copies of a scene when it renders an image larger than one GL target in tiles.
+    tile = None
+
+    @property
+    def tile_origin(self):
+        """Lower-left pixel of the tile (0, 0 for the whole image)."""
+        return (0, 0) if self.tile is None else (self.tile[0], self.tile[1])
+
+    @property
+    def target_size(self):
+        """(width, height) of what one render draws: the tile's, or the image's."""
+        return (self.width, self.height) if self.tile is None else (self.tile[2], self.tile[3])
 
     @property
     def is_mesh(self):

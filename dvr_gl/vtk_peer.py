@@ -152,20 +152,8 @@ class _KeepCurrentContext:
     _EGL_DRAW, _EGL_READ = 0x3059, 0x305A
 
     def __init__(self):
-        self._egl = None
-        try:
-            import ctypes
-            egl = ctypes.CDLL("libEGL.so.1")
-            for name in ("eglGetCurrentContext", "eglGetCurrentDisplay"):
-                getattr(egl, name).restype = ctypes.c_void_p
-                getattr(egl, name).argtypes = []
-            egl.eglGetCurrentSurface.restype = ctypes.c_void_p
-            egl.eglGetCurrentSurface.argtypes = [ctypes.c_int]
-            egl.eglMakeCurrent.restype = ctypes.c_uint
-            egl.eglMakeCurrent.argtypes = [ctypes.c_void_p] * 4
-            self._egl = egl
-        except (OSError, AttributeError):
-            self._egl = None
+        from .gl.context import egl_library
+        self._egl = egl_library()
         self._saved = None
 
     def __enter__(self):

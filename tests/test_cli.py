@@ -548,3 +548,41 @@ def test_render_splat_on_a_mesh(renderer, tiny_mesh, capsys):
     assert _png(out)[1][..., 3].max() > 0
     code, _, err = _run(["render", d / "tiny.vtu", "--technique", "splat", "--density", "2", "--out", out], capsys)
     assert code != 0 and "density applies to grids" in err
+
+
+def test_all_techniques_bench_quick_run(tmp_path, capsys):
+    """`dvr-gl bench --suite all --quick` end to end: every technique on a grid and a mesh,
+    the VTK peers beside them, all files written, the Pareto front marked, the GPU memory
+    counted, errors falling with each technique's quality parameter."""
+    pytest.importorskip("vtk")
+    from dvr_gl import bench, bench_all
+    parser = argparse.ArgumentParser()
+    bench.add_arguments(parser)
+    args = parser.parse_args(["--suite", "all", "--quick", "--size", "64", "--out", str(tmp_path / "all")])
+    assert bench.run_bench(args) == 0
+    rows = list(csv.DictReader(open(tmp_path / "all" / "all.csv")))
+    techniques = {(r["scene"], r["technique"]) for r in rows}
+    for t in ("raycast", "slice3d", "slice2d", "particles", "splat", "vtk raycast"):
+        assert ("Marschner-Lobb", t) in techniques
+    for t in ("tetra", "particles", "splat", "vtk tetra"):
+        assert ("Delaunay ball", t) in techniques
+    by = {(r["scene"], r["technique"], r["value"]): r for r in rows}
+    assert float(by[("Marschner-Lobb", "raycast", "0.5")]["rmse"]) < float(by[("Marschner-Lobb", "raycast", "1.0")]["rmse"])
+    assert float(by[("Marschner-Lobb", "slice2d", "1")]["rmse"]) < float(by[("Marschner-Lobb", "slice2d", "0")]["rmse"])
+    assert float(by[("Delaunay ball", "tetra", "mpvo")]["rmse"]) < 1e-4
+    assert all(float(r["gpu_mb"]) > 0 for r in rows if not r["technique"].startswith("vtk"))
+    assert all(float(r["first_ms"]) > 0 and float(r["ms_median"]) > 0 for r in rows)
+    table = (tmp_path / "all" / "all.md").read_text()
+    assert table.count("| yes |") == len(bench_all.pareto([{**r, "ms_median": float(r["ms_median"]),
+                                                             "rmse": float(r["rmse"])} for r in rows]))
+    for name in ("all.json", "all.png", "contact.png"):
+        assert (tmp_path / "all" / name).stat().st_size > 0
+    doc = json.load(open(tmp_path / "all" / "all.json"))
+    assert doc["info"]["dvr_gl"]["renderer"] and "vtk" in doc["info"]
+
+
+def test_pareto_front():
+    from dvr_gl.bench_all import pareto
+    rows = [{"scene": "a", "ms_median": t, "rmse": e} for t, e in ((1, 5), (2, 3), (3, 4), (4, 1), (2, 3.5))]
+    rows.append({"scene": "b", "ms_median": 9, "rmse": 9})
+    assert [(r["ms_median"], r["rmse"]) for r in pareto(rows)] == [(1, 5), (2, 3), (4, 1), (9, 9)]

@@ -369,3 +369,24 @@ def test_slivers_glued_to_a_cube(renderer, height):
         img = renderer.render(scene, technique="tetra")
         assert np.abs(img - dvr_gl.reference.exact(scene)).max() < GL_TOL
         assert img[..., 3].max() > 0.2
+
+
+def test_depth_ranges_restart_and_cells_behind_the_eye_get_their_own_draws(renderer, monkeypatch):
+    """Each cell's fragments carry its slot's depth, and depths restart every
+    SLOTS_PER_DEPTH_RANGE slots (with the depths cleared): forcing a restart every 7
+    cells changes no pixel. With the eye inside, cells reaching behind the eye's plane
+    are drawn in runs of their own."""
+    mesh = blocks_mesh([(x, y, z) for x in range(3) for y in range(2) for z in range(3)])
+    scene = Scene(mesh, TF, Camera((1.5, 1.0, 2.5), (1.5, 1.0, -3.0), fov=70), 40, 32)
+    plan = tetra.make_plan(scene)
+    calls = tetra.draw_calls(plan)
+    assert any(exact for _, _, exact in calls) and not all(exact for _, _, exact in calls)
+    assert sum(count for _, count, _ in calls) == plan.draw.size
+    for s in (scene, scene.replace(camera=Camera((6.0, 5.0, 7.0), (1.5, 1.0, 1.0), fov=30))):
+        whole = renderer.render(s, technique="tetra")
+        monkeypatch.setattr(tetra, "SLOTS_PER_DEPTH_RANGE", 7)
+        assert len(tetra.draw_calls(tetra.make_plan(s))) >= plan.draw.size // 7
+        chunked = renderer.render(s, technique="tetra")
+        monkeypatch.undo()
+        assert whole[..., 3].max() > 0.3
+        assert np.abs(chunked - whole).max() == 0.0

@@ -102,8 +102,52 @@ class _OSMesaLoader:
             self._ctx = None
 
 
+_LIBEGL = []  # [the library or None], loaded on first use
+EGL_CONTEXT_CLIENT_TYPE = 0x3097
+
+
+def egl_library():
+    """libEGL through ctypes, for the few calls moderngl does not make (None without it)."""
+    if not _LIBEGL:
+        try:
+            egl = ctypes.CDLL("libEGL.so.1")
+            for name in ("eglGetCurrentContext", "eglGetCurrentDisplay"):
+                getattr(egl, name).restype = ctypes.c_void_p
+                getattr(egl, name).argtypes = []
+            egl.eglGetCurrentSurface.restype = ctypes.c_void_p
+            egl.eglGetCurrentSurface.argtypes = [ctypes.c_int]
+            egl.eglMakeCurrent.restype = ctypes.c_uint
+            egl.eglMakeCurrent.argtypes = [ctypes.c_void_p] * 4
+            egl.eglQueryContext.restype = ctypes.c_uint
+            egl.eglQueryContext.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int,
+                                            ctypes.POINTER(ctypes.c_int)]
+        except (OSError, AttributeError):
+            egl = None
+        _LIBEGL.append(egl)
+    return _LIBEGL[0]
+
+
 def _create_egl():
-    return moderngl.create_context(standalone=True, backend="egl", require=REQUIRED_GL)
+    ctx = moderngl.create_context(standalone=True, backend="egl", require=REQUIRED_GL)
+    egl = egl_library()
+    if egl is not None:
+        with ctx:  # moderngl makes it current: note which EGL display and context it is
+            ctx.extra = {"egl_handles": (egl.eglGetCurrentDisplay(), egl.eglGetCurrentContext())}
+    return ctx
+
+
+def context_lost(ctx):
+    """True when ``ctx``'s EGL context no longer exists. EGL keeps one display per device
+    in a process, and another library that terminates it (VTK does when one of its
+    offscreen windows is finalised; pyvista's ``close()`` does that) destroys every
+    context on it: GL calls then fail or, worse, return garbage. Contexts of other kinds
+    are never lost this way."""
+    handles = (ctx.extra or {}).get("egl_handles") if isinstance(ctx.extra, dict) else None
+    egl = egl_library()
+    if not handles or egl is None:
+        return False
+    value = ctypes.c_int()
+    return not egl.eglQueryContext(handles[0], handles[1], EGL_CONTEXT_CLIENT_TYPE, ctypes.byref(value))
 
 
 def _create_osmesa():
@@ -152,8 +196,12 @@ def shared_context(backend="auto"):
     """The process's context for ``backend`` (made on first use, kept until exit) and the
     name of the backend behind it. Renderers share it and release only their own objects:
     tearing down an EGL context can invalidate the other contexts on the same display
-    once another library (VTK) has used it, so contexts are never destroyed mid-process."""
+    once another library (VTK) has used it, so contexts are never destroyed mid-process.
+    A context another library destroyed (see ``context_lost``) is replaced by a new one."""
     key = backend
+    for ctx in {id(c): c for c, _ in _SHARED.values()}.values():
+        if context_lost(ctx):
+            _forget(ctx)
     if key not in _SHARED:
         if backend == "auto":
             for name in BACKENDS:  # reuse a backend already made before trying to make one
@@ -164,6 +212,18 @@ def shared_context(backend="auto"):
         _SHARED[key] = _SHARED.setdefault(name, (ctx, name))
     return _SHARED[key]
 
+
+def _forget(lost):
+    """Drop every record of a lost context, so that the next request makes a new one (its
+    objects died with it: nothing is released)."""
+    for key in [k for k, (ctx, _) in _SHARED.items() if ctx is lost]:
+        del _SHARED[key]
+    _IDLE_FRAMEBUFFERS.pop(id(lost), None)
+    _CURRENT_DEPTH.pop(id(lost), None)
+    LOST_CONTEXTS.append(lost.extra["egl_handles"])
+
+
+LOST_CONTEXTS = []  # EGL handles of the contexts found lost and replaced, for the record
 
 _CURRENT_DEPTH = {}
 

@@ -134,6 +134,27 @@ def blend_over(dst, src, target="rgba32f"):
     return round_to_target(src + (1 - src[..., 3:4]) * dst, target)
 
 
+MAX_CHORD_SEGMENTS = 4096  # as shaders/common/slice_gap.glsl
+
+
+def chord_color(segment, a, b, max_step):
+    """Premultiplied RGBA of whole chords [a, b] in equal sub-segments of at most
+    ``max_step``, front to back (GLSL ``chordColor``, the slicing techniques' gap
+    fragments). ``segment(rows, a, b)`` gives the colours of segments [a, b] of the rays
+    ``rows`` (indices into ``a`` and ``b``)."""
+    a = np.asarray(a, np.float64)
+    b = np.asarray(b, np.float64)
+    n = np.clip(np.ceil((b - a) / max_step), 1, MAX_CHORD_SEGMENTS).astype(np.int64)
+    h = (b - a) / n
+    acc = np.zeros((len(a), 4))
+    for i in range(int(n.max(initial=0))):
+        rows = np.nonzero(i < n)[0]
+        start = a[rows] + i * h[rows]
+        end = np.where(i == n[rows] - 1, b[rows], a[rows] + (i + 1) * h[rows])
+        acc[rows] = blend_over(segment(rows, start, end), acc[rows])
+    return acc
+
+
 def round_to_target(x, target):
     """What a render target of format ``target`` stores for the float values ``x``.
 

@@ -1,11 +1,11 @@
 """NumPy reference of 2D texture slicing: the same stack, slice order, per-fragment slabs
-and blending as ``shaders/slice2d/slice2d.frag``, in float64."""
+and blending as ``shaders/slice2d/slice2d.frag``, in float64, then its gap pass."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from .common import blend_over, box_rays, cell_is_valid, classified_segment, classifier, trilinear, world_to_index
+from .common import blend_over, box_rays, cell_is_valid, chord_color, classified_segment, classifier, trilinear, world_to_index
 
 
 def render_plan(plan, lut_exact=False):
@@ -72,6 +72,38 @@ def render_plan(plan, lut_exact=False):
             back = plan.preint.segment(s, s_back, np.maximum(np.where(far_in, t_far, r1) - tj, 0))
             front = plan.preint.segment(sample_between(r0), s, np.maximum(tj - r0, 0))
             src = np.where(near_in[:, None], back, blend_over(back, front))
+        src[src[:, 3] <= 0] = 0
+        acc[rows] = blend_over(acc[rows], src, plan.target)
+
+    # the gap pass: rays that meet no slice inside the box get their whole chord
+    gap = t1 > t0
+    wa = (o[:, w] + np.where(gap, t0, 0) * d[:, w]) / plan.slice_distance
+    wb = (o[:, w] + np.where(gap, t1, 0) * d[:, w]) / plan.slice_distance
+    j_lo = np.floor(np.minimum(wa, wb)).astype(np.int64)
+    j_hi = np.ceil(np.maximum(wa, wb)).astype(np.int64)
+    gap &= j_hi - j_lo <= 3
+    for shift in range(5):
+        j = j_lo + shift
+        gap &= ~((j <= j_hi) & inside(j, slice_t(j)))
+    rows = np.nonzero(gap)[0]
+    if rows.size:
+        o_gap, d_gap = o[rows], d[rows]
+
+        def segment(sub, a, b):
+            oo, dd = o_gap[sub], d_gap[sub]
+
+            def at(tt):
+                return trilinear(values, (oo + tt[:, None] * dd) / volume.spacing)
+            if plan.preint is None:
+                out = classified_segment(classify, transparency, at(0.5 * (a + b)), (b - a) / scene.tf.unit_distance)
+            else:
+                out = plan.preint.segment(at(a), at(b), b - a)
+            if volume.has_nonfinite:
+                mid = oo + (0.5 * (a + b))[:, None] * dd + lo
+                out[~cell_is_valid(volume, world_to_index(volume, mid))] = 0
+            return out
+
+        src = chord_color(segment, t0[rows], t1[rows], plan.slice_distance)
         src[src[:, 3] <= 0] = 0
         acc[rows] = blend_over(acc[rows], src, plan.target)
     return acc.reshape(H, W, 4)

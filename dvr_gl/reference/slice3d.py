@@ -2,13 +2,13 @@
 blending order as ``shaders/slice3d/slice3d.frag``, in float64 (per-target rounding of
 the blending as ``common.blend_over`` models it). The polygons only decide which pixels
 a slice may cover; the shader's per-fragment test decides which it does, so the
-reference applies that test to every pixel."""
+reference applies that test to every pixel (and the gap pass's test after the slices)."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from .common import blend_over, box_rays, cell_is_valid, classified_segment, classifier, trilinear, world_to_index
+from .common import blend_over, box_rays, cell_is_valid, chord_color, classified_segment, classifier, trilinear, world_to_index
 
 
 def segment_colors(plan, sample, valid, a, b, lut_exact=False):
@@ -72,6 +72,33 @@ def render_plan(plan, lut_exact=False):
             src = segment_colors(plan, sample, valid, tk, np.where(far_in, t_far, r1))
             front = segment_colors(plan, sample, valid, r0, tk)
             src = np.where(near_in[:, None], src, blend_over(src, front))
+        src[src[:, 3] <= 0] = 0
+        acc[rows] = blend_over(acc[rows], src, plan.target)
+
+    # the gap pass: rays that meet no slice inside the box get their whole chord
+    per_t = np.ones(len(o)) if plan.shells else cos_theta
+    gap = (t1 > t0) & ((t1 - t0) * per_t <= 2 * plan.step)
+    k_far = np.ceil((plan.far_depth - np.where(gap, t1, 0) * per_t) / plan.step).astype(np.int64)
+    for shift in range(-1, 3):
+        k = k_far + shift
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = (plan.far_depth - k * plan.step) / per_t
+        gap &= ~((k >= 0) & (k < plan.count) & (t > 0) & (t >= t0) & (t <= t1))
+    rows = np.nonzero(gap)[0]
+    if rows.size:
+        o_gap, d_gap = o[rows], d[rows]
+
+        def segment(sub, a, b):
+            oo, dd = o_gap[sub], d_gap[sub]
+
+            def sample(tt):
+                return trilinear(values, (oo + tt[:, None] * dd) / volume.spacing)
+
+            def valid_cells(tt):
+                return cell_is_valid(volume, world_to_index(volume, oo + tt[:, None] * dd + lo))
+            return segment_colors(plan, sample, valid_cells if volume.has_nonfinite else None, a, b, lut_exact)
+
+        src = chord_color(segment, t0[rows], t1[rows], plan.step)
         src[src[:, 3] <= 0] = 0
         acc[rows] = blend_over(acc[rows], src, plan.target)
     return acc.reshape(H, W, 4)

@@ -61,7 +61,8 @@ def camera_uniforms(scene):
     cam = scene.camera
     lo, _ = scene.volume.bounds
     sx, sy = cam.screen_scale(scene.width, scene.height)
-    return {"u_viewport": (scene.width, scene.height), "u_eye": tuple(cam.eye - lo),
+    return {"u_viewport": (scene.width, scene.height), "u_tile_origin": scene.tile_origin,
+            "u_eye": tuple(cam.eye - lo),
             "u_right": tuple(cam.right), "u_up": tuple(cam.true_up), "u_forward": tuple(cam.forward),
             "u_screen": (sx, sy)}
 
@@ -129,13 +130,29 @@ def eye_view_projection(scene, near, far):
         proj = pyrr.matrix44.create_perspective_projection(cam.fov, scene.width / scene.height, near, far,
                                                            dtype=np.float64)
     view = pyrr.matrix44.create_look_at(eye, eye + cam.forward, cam.true_up, dtype=np.float64)
-    return view @ proj
+    return view @ proj @ tile_matrix(scene)
+
+
+def tile_matrix(scene):
+    """Clip-space transform from the whole image to the scene's tile (identity without
+    one): x' = (x - c w) * s per axis, c the tile's centre and s the image over the tile
+    size (row-vector convention, like pyrr)."""
+    m = np.eye(4)
+    if scene.tile is None:
+        return m
+    x, y, w, h = scene.tile
+    for axis, (start, size, full) in enumerate(((x, w, scene.width), (y, h, scene.height))):
+        scale = full / size
+        centre = (2.0 * start + size) / full - 1.0
+        m[axis, axis] = scale
+        m[3, axis] = -centre * scale
+    return m
 
 
 def cleared_target(renderer, scene, target):
     """The renderer's float target for this image size and format, bound and cleared to
     transparent black: where every technique draws."""
-    fbo = renderer.target(scene.width, scene.height, TARGETS[target])
+    fbo = renderer.target(*scene.target_size, TARGETS[target])
     fbo.use()
     fbo.clear(0.0, 0.0, 0.0, 0.0)
     return fbo
@@ -180,17 +197,24 @@ def box_depth_range(scene):
 
 
 
-def box_proxy(scene):
+def box_proxy(scene, grow_pixels=0.0):
     """The geometry that makes one fragment per pixel the volume box covers:
     ("box", model-view-projection of the unit cube's back faces) or, with the eye inside
-    or nearly on the box, ("fullscreen", identity) for one full-screen triangle."""
+    or nearly on the box, ("fullscreen", identity) for one full-screen triangle.
+    ``grow_pixels`` grows the box on every side by at least that many pixels of the image
+    (measured at the box's farthest depth), so that rasterisation, which snaps vertices
+    to a grid (``grow_pixels(ctx)``), never drops a pixel whose ray meets the box: the
+    shaders decide coverage themselves."""
     import pyrr
     cam = scene.camera
     lo, _ = scene.volume.bounds
     extent = scene.volume.extent
     eye = cam.eye - lo
     dmin, dmax = box_depth_range(scene)
-    margin = 1e-3 * float(np.linalg.norm(extent))
+    hx, hy = cam.screen_scale(scene.width, scene.height)
+    pixel = 2.0 * hy / scene.height * (1.0 if cam.is_ortho else max(dmax, 0.0))
+    grow = grow_pixels * pixel
+    margin = 1e-3 * float(np.linalg.norm(extent)) + 2.0 * grow
     if cam.is_ortho:
         near, far = dmin - margin, dmax + margin
     else:
@@ -198,13 +222,37 @@ def box_proxy(scene):
         distance = float(np.linalg.norm(gap))
         if distance < margin:
             return "fullscreen", np.eye(4)
-        # Every exit point is at least `distance` from the eye and within the view's
-        # diagonal half-angle of the axis, so this near plane never clips a back face.
-        hx, hy = cam.screen_scale(scene.width, scene.height)
-        near = 0.5 * distance / math.sqrt(1.0 + hx * hx + hy * hy)
+        # Every exit point is at least `distance - grow * sqrt(3)` from the eye and within
+        # the view's diagonal half-angle of the axis, so this near plane never clips a
+        # back face.
+        near = 0.5 * (distance - 1.75 * grow) / math.sqrt(1.0 + hx * hx + hy * hy)
         far = dmax * 1.01 + margin
-    model = pyrr.matrix44.create_from_scale(extent, dtype=np.float64)
+    model = (pyrr.matrix44.create_from_scale(extent + 2 * grow, dtype=np.float64)
+             @ pyrr.matrix44.create_from_translation(np.full(3, -grow), dtype=np.float64))
     return "box", model @ eye_view_projection(scene, near, far)
+
+
+def grow_pixels(ctx):
+    """How far proxies whose fragments decide coverage themselves are grown, in pixels:
+    twice the rasteriser's vertex snapping, 2^-GL_SUBPIXEL_BITS (GL promises at least 4
+    bits; llvmpipe has 8)."""
+    bits = ctx.info.get("GL_SUBPIXEL_BITS") or 4
+    return 2.0 ** (1 - min(int(bits), 12))
+
+
+def draw_box_instances(renderer, prog, scene, instances):
+    """Draw ``shaders/common/box_instances.vert`` geometry: the slightly grown box's back
+    faces (front faces culled), or the full-screen triangle, ``instances`` times."""
+    ctx = renderer.ctx
+    kind, view_proj = box_proxy(scene, grow_pixels=grow_pixels(ctx))
+    prog["u_view_proj"].write(view_proj.astype("f4").tobytes())
+    if kind == "box":
+        ctx.enable(ctx.CULL_FACE)
+        ctx.cull_face = "front"
+    try:
+        renderer.proxy_vao(prog, kind).render(instances=instances)
+    finally:
+        ctx.disable(ctx.CULL_FACE)
 
 
 class SizedTarget:

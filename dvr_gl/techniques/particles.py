@@ -38,6 +38,7 @@ from ..progress import Progress
 from ..scene import Scene
 from .common import cleared_target, SizedTarget, bind, camera_uniforms, check_scene, check_target, data_projection
 
+POINT_SPRITES = True  # drawn as GL points, which are clipped by their centres (see Renderer.render)
 MODES = ("composite",)
 PROGRESS_CANDIDATES = 5_000_000    # generation this large (all sets) shows a progress bar
 TAKES_STEP = False
@@ -133,7 +134,7 @@ def draw(renderer, plan):
     if plan.count == 0:
         return fbo
     scratch = renderer.resource("particles_scratch", make=lambda: SizedTarget(ctx, depth=True), capacity=1).get(
-        scene.width, scene.height)
+        *scene.target_size)
     prog = renderer.programs.get("particles/particles.vert", "particles/particles.frag", plan.defines)
     average = renderer.programs.get("tetra/fullscreen.vert", "particles/average.frag")
     uniforms = {**camera_uniforms(scene), "u_radius": plan.radius, "u_pixels_per_unit": pixels_per_unit(scene),

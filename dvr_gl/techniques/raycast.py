@@ -55,6 +55,7 @@ from ..reference.shading import gradient_epsilon
 from ..scene import Scene
 from ..transfer import LookupTable
 from .common import (cleared_target, add_optional_inputs, bind, box_proxy, camera_uniforms, check_flag, check_scene,
+                     grow_pixels,
                      check_step, check_target, preintegration_table, tf_uniforms, volume_uniforms)
 
 BRICK = 8            # brick edge in cells, for empty-space skipping
@@ -242,7 +243,7 @@ def draw(renderer, plan):
         uniforms["u_gradient_epsilon"] = gradient_epsilon(volume)
     bind(prog, textures, uniforms)
 
-    kind, view_proj = box_proxy(scene)
+    kind, view_proj = box_proxy(scene, grow_pixels=grow_pixels(renderer.ctx))
     prog["u_view_proj"].write(view_proj.astype("f4").tobytes())
     vao = renderer.proxy_vao(prog, kind)
     fbo = cleared_target(renderer, scene, plan.target)

@@ -50,6 +50,7 @@ from ..cache import TableCache
 from ..scene import Scene
 from ..transfer import LookupTable
 from .common import (cleared_target, add_optional_inputs, bind, box_depth_range, camera_uniforms, check_flag,
+                     draw_box_instances,
                      check_scene, check_target, eye_view_projection, preintegration_table, tf_uniforms,
                      volume_uniforms)
 
@@ -178,6 +179,9 @@ def draw(renderer, plan):
     ctx.blend_equation = ctx.FUNC_ADD
     try:
         renderer.stream_vao(prog, "slice2d", positions, indices).render(ctx.TRIANGLES)
+        gap = renderer.programs.get("common/box_instances.vert", "slice2d/slice2d.frag", {**plan.defines, "GAP": 1})
+        bind(gap, textures, uniforms)
+        draw_box_instances(renderer, gap, scene, 1)
     finally:
         ctx.disable(ctx.BLEND)
     return fbo

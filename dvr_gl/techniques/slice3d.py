@@ -52,7 +52,7 @@ from ..cache import TableCache
 from ..scene import Scene
 from ..transfer import LookupTable
 from . import proxy as proxy_geometry
-from .common import (cleared_target, add_optional_inputs, bind, box_proxy, camera_uniforms, check_flag, check_scene,
+from .common import (cleared_target, add_optional_inputs, bind, camera_uniforms, draw_box_instances, check_flag, check_scene,
                      check_step, check_target, eye_view_projection, preintegration_table, tf_uniforms,
                      volume_uniforms)
 
@@ -158,7 +158,7 @@ def draw(renderer, plan):
     volume = scene.volume
     cam = scene.camera
     if plan.shells:
-        vertex_shader = "slice3d/shell.vert"
+        vertex_shader = "common/box_instances.vert"
     elif plan.proxy == "vertex":
         vertex_shader = "slice3d/proxy_vertex.vert"
     else:
@@ -180,12 +180,7 @@ def draw(renderer, plan):
     ctx.blend_equation = ctx.FUNC_ADD
     try:
         if plan.shells:
-            kind, view_proj = box_proxy(scene)
-            prog["u_view_proj"].write(view_proj.astype("f4").tobytes())
-            if kind == "box":
-                ctx.enable(ctx.CULL_FACE)
-                ctx.cull_face = "front"
-            renderer.proxy_vao(prog, kind).render(instances=plan.count)
+            draw_box_instances(renderer, prog, scene, plan.count)
         elif plan.proxy == "vertex":
             corners = _inflated_corners(volume)
             tables = proxy_geometry.vertex_path_tables(cam.forward)
@@ -200,6 +195,9 @@ def draw(renderer, plan):
             positions, slices = proxy_geometry.fan_triangles(vertices, counts)
             prog["u_view_proj"].write(_plane_projection(plan).astype("f4").tobytes())
             renderer.stream_vao(prog, "slice3d_cpu", positions, slices).render(ctx.TRIANGLES)
+        gap = renderer.programs.get("common/box_instances.vert", "slice3d/slice3d.frag", {**plan.defines, "GAP": 1})
+        bind(gap, textures, uniforms)
+        draw_box_instances(renderer, gap, scene, 1)
     finally:
         ctx.disable(ctx.BLEND | ctx.CULL_FACE)
     return fbo

@@ -52,6 +52,7 @@ from .common import cleared_target, bind, camera_uniforms, check_scene, check_ta
 from ..particles import extinction
 from .particles import pixels_per_unit
 
+POINT_SPRITES = True  # drawn as GL points, which are clipped by their centres (see Renderer.render)
 MODES = ("composite",)
 TAKES_STEP = False
 DATA = ("volume", "mesh")

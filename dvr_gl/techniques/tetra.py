@@ -45,7 +45,8 @@ from ..cache import TableCache
 from ..mesh import LOCAL_FACES, Order, centroid_order, mpvo_order, topology, visible_cells
 from ..reference.linear_segment import SegmentKnots
 from ..scene import Scene
-from .common import cleared_target, SizedTarget, bind, camera_uniforms, check_scene, check_target, data_projection, knot_uniforms
+from .common import (cleared_target, SizedTarget, bind, camera_uniforms, check_scene, check_target, data_projection,
+                     grow_pixels, knot_uniforms)
 
 MODES = ("composite", "mip", "minip", "average")
 TAKES_STEP = False
@@ -66,6 +67,18 @@ class TetraPlan:
     target: str = "rgba32f"
     defines: dict = field(default_factory=dict)
     sort_seconds: float = 0.0      # time spent ordering for this view (0 when cached)
+    behind_eye: np.ndarray = None  # per draw slot: the cell reaches behind the eye's plane
+
+
+def reaches_behind_eye(scene, cells):
+    """Per cell: does it come within 1e-3 of the mesh's diagonal of the plane through a
+    perspective eye (or behind it)? Its outline is then not finite (tetra.vert)."""
+    if scene.camera.is_ortho or len(cells) == 0:
+        return np.zeros(len(cells), bool)
+    mesh = scene.volume
+    depth = (mesh.points - scene.camera.eye) @ scene.camera.forward
+    near = 1e-3 * float(np.linalg.norm(mesh.extent))
+    return depth[topology(mesh).tets[cells]].min(axis=1) <= near
 
 
 def make_plan(scene, step=None, *, sort="mpvo", target="rgba32f", tables=None):
@@ -89,7 +102,7 @@ def make_plan(scene, step=None, *, sort="mpvo", target="rgba32f", tables=None):
         if scene.camera.is_ortho:
             defines["ORTHO"] = 1
         return TetraPlan(scene=scene, knots=knots, visible=cells, order=Order(cells, 0, 0), draw=cells,
-                         sort=sort, target=target, defines=defines)
+                         sort=sort, target=target, defines=defines, behind_eye=reaches_behind_eye(scene, cells))
     visible = tables.get("visible_cells", mesh, tf, make=visible_cells)
     timing = {}
 
@@ -109,7 +122,8 @@ def make_plan(scene, step=None, *, sort="mpvo", target="rgba32f", tables=None):
     if scene.camera.is_ortho:
         defines["ORTHO"] = 1
     return TetraPlan(scene=scene, knots=knots, visible=visible, order=result, draw=draw, sort=sort,
-                     target=target, defines=defines, sort_seconds=timing.get("sort", 0.0))
+                     target=target, defines=defines, sort_seconds=timing.get("sort", 0.0),
+                     behind_eye=reaches_behind_eye(scene, draw))
 
 
 def knot_capacity(count):
@@ -213,25 +227,42 @@ def draw(renderer, plan):
     fbo = cleared_target(renderer, scene, plan.target)
     if plan.draw.size == 0:
         return fbo
-    if not composite:
-        # the reduction needs float precision whatever the output target is
-        reduced = renderer.resource("tetra_reduced", make=lambda: SizedTarget(ctx), capacity=1).get(
-            scene.width, scene.height)
-        reduced.use()
-        reduced.clear(-3.0e38 if scene.mode != "average" else 0.0, 0.0, 0.0, 0.0)
     prog = renderer.programs.get("tetra/tetra.vert", "tetra/tetra.frag", plan.defines)
     data = renderer.resource("tetra_mesh", mesh, make=lambda: MeshTextures(ctx, mesh), capacity=1)
     order = renderer.resource("tetra_order", make=_OrderTexture, capacity=1).write(ctx, plan.draw)
+    view_proj = data_projection(scene).astype("f4").tobytes()
+
+    # the outline pass: every cell's grown outline in window coordinates (outline.frag)
+    outline = renderer.resource("tetra_outline", make=lambda: _OutlineTarget(ctx), capacity=1).get(
+        int(plan.draw.size))
+    outline_prog = renderer.programs.get("tetra/fullscreen.vert", "tetra/outline.frag")
+    bind(outline_prog, {"t_order": order, "t_tets": data.tets, "t_points": data.points},
+         {"u_target_size": scene.target_size, "u_inflate": grow_pixels(ctx), "u_slots": int(plan.draw.size)})
+    outline_prog["u_view_proj"].write(view_proj)
+    outline.use()
+    renderer.empty_vao(outline_prog).render(ctx.TRIANGLES, vertices=3)
+
+    if composite:
+        color = fbo.color_attachments[0]
+        drawn = renderer.resource("tetra_depth", color, make=lambda: _DepthFramebuffer(ctx, color), capacity=2).fbo
+    else:
+        # the reduction needs float precision whatever the output target is
+        drawn = reduced = renderer.resource("tetra_reduced", make=lambda: SizedTarget(ctx, depth=True),
+                                            capacity=1).get(*scene.target_size)
+    drawn.use()
+    drawn.clear(-3.0e38 if scene.mode in ("mip", "minip") else 0.0, 0.0, 0.0, 0.0, depth=0.0)
     textures = {"t_order": order, "t_tets": data.tets, "t_points": data.points, "t_planes": data.planes,
-                "t_field": data.field}
-    uniforms = {**camera_uniforms(scene), "u_knot_count": plan.knots.count,
-                "u_inv_unit": plan.knots.inv_unit}
+                "t_field": data.field, "t_outline01": outline.color_attachments[0],
+                "t_outline23": outline.color_attachments[1]}
+    uniforms = {**camera_uniforms(scene), "u_knot_count": plan.knots.count, "u_inv_unit": plan.knots.inv_unit,
+                "u_target_size": scene.target_size,
+                "u_centre": tuple(mesh.points.mean(axis=0) - mesh.bounds[0])}
     bind(prog, textures, uniforms)
     knot_uniforms(prog, plan.knots, plan.defines["KNOT_CAPACITY"])
-    prog["u_view_proj"].write(data_projection(scene).astype("f4").tobytes())
+    prog["u_view_proj"].write(view_proj)
     vao = renderer.resource("tetra_faces", make=lambda: _FaceIndices(ctx), capacity=1).vao(prog, plan.draw.size)
-    ctx.disable(ctx.DEPTH_TEST)
     ctx.enable(ctx.BLEND | ctx.CULL_FACE)
+    ctx.depth_func = ">"
     ctx.cull_face = "front"
     if composite:
         ctx.blend_func = ctx.ONE, ctx.ONE_MINUS_SRC_ALPHA
@@ -239,8 +270,22 @@ def draw(renderer, plan):
     else:
         ctx.blend_func = ctx.ONE, ctx.ONE
         ctx.blend_equation = ctx.FUNC_ADD if scene.mode == "average" else ctx.MAX
-    vao.render(ctx.TRIANGLES, vertices=12 * int(plan.draw.size))
-    ctx.disable(ctx.BLEND | ctx.CULL_FACE)
+    depth_range = 0
+    for first, count, exact in draw_calls(plan):
+        if first // SLOTS_PER_DEPTH_RANGE != depth_range:   # depths restart: clear them only
+            depth_range = first // SLOTS_PER_DEPTH_RANGE
+            depth_only = ctx.framebuffer(depth_attachment=drawn.depth_attachment)
+            depth_only.clear(depth=0.0)
+            drawn.use()
+            depth_only.release()
+        if exact:   # cells behind the eye's plane: their faces as they are (tetra.vert)
+            ctx.disable(ctx.DEPTH_TEST)
+        else:       # grown outlines, one fragment per cell by the depth test
+            ctx.enable(ctx.DEPTH_TEST)
+        bind(prog, {}, {"u_first_slot": depth_range * SLOTS_PER_DEPTH_RANGE, "u_exact_faces": exact})
+        vao.render(ctx.TRIANGLES, vertices=12 * count, first=12 * first)
+    ctx.disable(ctx.BLEND | ctx.CULL_FACE | ctx.DEPTH_TEST)
+    ctx.depth_func = "<"
     ctx.blend_equation = ctx.FUNC_ADD
     if not composite:
         classify = renderer.programs.get("tetra/fullscreen.vert", "tetra/tetra_classify.frag",
@@ -251,6 +296,63 @@ def draw(renderer, plan):
         knot_uniforms(classify, plan.knots, plan.defines["KNOT_CAPACITY"])
         renderer.empty_vao(classify).render(ctx.TRIANGLES, vertices=3)
     return fbo
+
+
+SLOTS_PER_DEPTH_RANGE = (1 << 22) - 1  # cells with distinct depths (k + 1) / 2^22 (tetra.vert)
+
+
+def draw_calls(plan):
+    """(first slot, count, exact) per draw call: runs of cells in drawing order, split
+    where cells start or stop reaching behind the eye's plane (``exact``: drawn with
+    their faces as they are, see tetra.vert) and where depths restart (every
+    SLOTS_PER_DEPTH_RANGE slots)."""
+    n = int(plan.draw.size)
+    if n == 0:
+        return []
+    exact = plan.behind_eye
+    cuts = set(range(0, n, SLOTS_PER_DEPTH_RANGE)) | set((np.flatnonzero(np.diff(exact)) + 1).tolist())
+    bounds = sorted(cuts) + [n]
+    return [(a, b - a, bool(exact[a])) for a, b in zip(bounds[:-1], bounds[1:])]
+
+
+class _OutlineTarget:
+    """The outline pass's two RGBA32F targets, TEXEL_ROW_WIDTH texels wide, one texel per
+    cell and pair of its corners; grown (never shrunk) as needed."""
+
+    def __init__(self, ctx):
+        self.ctx = ctx
+        self.fbo = None
+
+    def get(self, texels):
+        rows = max(1, -(-texels // TEXEL_ROW_WIDTH))
+        if self.fbo is None or self.fbo.size[1] < rows:
+            rows = max(rows, 2 * self.fbo.size[1]) if self.fbo is not None else rows
+            self.release()
+            textures = [self.ctx.texture((TEXEL_ROW_WIDTH, rows), 4, dtype="f4") for _ in range(2)]
+            for tex in textures:
+                tex.filter = (self.ctx.NEAREST, self.ctx.NEAREST)
+            self.fbo = self.ctx.framebuffer(textures)
+        return self.fbo
+
+    def release(self):
+        if self.fbo is not None:
+            for tex in self.fbo.color_attachments:
+                tex.release()
+            self.fbo.release()
+            self.fbo = None
+
+
+class _DepthFramebuffer:
+    """A framebuffer over a target's colour texture with a 24-bit depth texture of its
+    own, for the depth test that keeps one fragment per cell and pixel (tetra.vert)."""
+
+    def __init__(self, ctx, color):
+        self.depth = ctx.depth_texture(color.size)
+        self.fbo = ctx.framebuffer([color], self.depth)
+
+    def release(self):
+        self.fbo.release()
+        self.depth.release()
 
 
 class _FaceIndices:

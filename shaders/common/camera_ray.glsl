@@ -1,5 +1,8 @@
 // The ray through the centre of this fragment's pixel (NumPy twin: scene.Camera.rays),
 // with positions relative to the volume box's lower corner.
+//
+// pixelCoord: this fragment's pixel centre in the whole image (GL window coordinates);
+// with tiles, gl_FragCoord is relative to the tile.
 #ifndef DVR_CAMERA_RAY_GLSL
 #define DVR_CAMERA_RAY_GLSL
 
@@ -7,7 +10,9 @@
 #define ORTHO 0
 #endif
 
-uniform vec2 u_viewport;      // image width, height in pixels
+uniform vec2 u_viewport;      // image width, height in pixels (the whole image)
+uniform vec2 u_tile_origin;   // where this render's target sits in the image (GL window
+                              // coordinates, pixels): (0, 0) unless rendered in tiles
 uniform vec3 u_eye;           // eye, relative to the box's lower corner
 uniform vec3 u_right;         // camera basis (world)
 uniform vec3 u_up;
@@ -16,8 +21,12 @@ uniform vec2 u_screen;        // half extent of the view: at unit distance, or w
 
 // Perspective rays start at the eye; orthographic ones on the plane through the eye
 // normal to the view. `dir` is a unit vector.
+vec2 pixelCoord() {
+    return gl_FragCoord.xy + u_tile_origin;
+}
+
 void pixelRay(out vec3 origin, out vec3 dir) {
-    vec2 ndc = gl_FragCoord.xy * (2.0 / u_viewport) - 1.0;
+    vec2 ndc = (gl_FragCoord.xy + u_tile_origin) * (2.0 / u_viewport) - 1.0;
     vec3 offset = (ndc.x * u_screen.x) * u_right + (ndc.y * u_screen.y) * u_up;
 #if ORTHO
     origin = u_eye + offset;

@@ -77,7 +77,7 @@ void main() {
 
 #if JITTER
     ivec2 jsize = textureSize(t_jitter, 0);
-    float jitter = texelFetch(t_jitter, ivec2(gl_FragCoord.xy) % jsize, 0).r;
+    float jitter = texelFetch(t_jitter, ivec2(pixelCoord()) % jsize, 0).r;
 #else
     float jitter = 0.0;
 #endif

@@ -9,6 +9,9 @@
 #ifndef MASK_NONFINITE
 #define MASK_NONFINITE 0
 #endif
+#ifndef GAP
+#define GAP 0
+#endif
 
 #include "common/camera_ray.glsl"
 #include "common/ray_box.glsl"
@@ -80,6 +83,7 @@ bool validAt(int j, float t, vec3 origin, vec3 dir) {
 }
 #endif
 
+#if !GAP
 void main() {
     vec3 origin, dir;
     pixelRay(origin, dir);
@@ -116,3 +120,46 @@ void main() {
 #endif
     if (f_color.a <= 0.0) discard;
 }
+#else
+// The segment [a, b] of a gap ray, from the two layers around each point.
+vec4 segmentColor(vec3 origin, vec3 dir, float a, float b) {
+#if !PREINTEGRATE
+    vec3 p = origin + (0.5 * (a + b)) * dir;
+#if MASK_NONFINITE
+    if (!insideValidCell(p)) return vec4(0.0);
+#endif
+    return classifiedSegment(sampleBetween(p), (b - a) * u_inv_unit);
+#else
+#if MASK_NONFINITE
+    if (!insideValidCell(origin + (0.5 * (a + b)) * dir)) return vec4(0.0);
+#endif
+    return preintegratedSegment(sampleBetween(origin + a * dir), sampleBetween(origin + b * dir), b - a);
+#endif
+}
+
+#include "common/slice_gap.glsl"
+
+// The gap pass: one fragment per pixel of the box; only rays that meet no slice inside
+// the box (or run parallel to the slices) are kept, and their whole chord is integrated.
+void main() {
+    vec3 origin, dir;
+    pixelRay(origin, dir);
+    vec2 range = intersectBox(origin, dir, vec3(0.0), u_extent);
+    if (!(range.y > range.x)) discard;
+    float cos_theta = dot(dir, u_forward);
+    // the slice planes the chord spans along the stack axis; more than two between its
+    // ends always leave one inside, fewer are tested as the slice fragments test them
+    float wa = (origin[u_axes.x] + range.x * dir[u_axes.x]) / u_slice_distance;
+    float wb = (origin[u_axes.x] + range.y * dir[u_axes.x]) / u_slice_distance;
+    int j_lo = int(floor(min(wa, wb)));
+    int j_hi = int(ceil(max(wa, wb)));
+    if (j_hi - j_lo > 3) discard;
+    if (dir[u_axes.x] != 0.0) {
+        for (int j = j_lo; j <= j_hi; ++j) {
+            if (sliceInside(j, sliceT(j, origin, dir), origin, dir, cos_theta)) discard;
+        }
+    }
+    f_color = chordColor(origin, dir, range.x, range.y, u_slice_distance);
+    if (f_color.a <= 0.0) discard;
+}
+#endif

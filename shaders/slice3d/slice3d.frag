@@ -12,6 +12,9 @@
 #ifndef MASK_NONFINITE
 #define MASK_NONFINITE 0
 #endif
+#ifndef GAP
+#define GAP 0
+#endif
 
 #include "common/camera_ray.glsl"
 #include "common/ray_box.glsl"
@@ -65,6 +68,7 @@ vec4 segmentColor(vec3 origin, vec3 dir, float a, float b) {
 }
 #endif
 
+#if !GAP
 void main() {
     vec3 origin, dir;
     pixelRay(origin, dir);
@@ -93,3 +97,31 @@ void main() {
 #endif
     if (f_color.a <= 0.0) discard;  // blending nothing is a no-op; skip the write
 }
+#else
+#include "common/slice_gap.glsl"
+
+// The gap pass: one fragment per pixel of the box; only rays that meet no slice inside
+// the box are kept, and their whole chord is integrated.
+void main() {
+    vec3 origin, dir;
+    pixelRay(origin, dir);
+    vec2 range = intersectBox(origin, dir, vec3(0.0), u_extent);
+    if (!(range.y > range.x)) discard;
+    float cos_theta = dot(dir, u_forward);
+#if SHELLS
+    float per_t = 1.0;        // the slices' depth (radius) grows as t
+#else
+    float per_t = cos_theta;  // the slices' depth grows as t * cos
+#endif
+    // slices 2 steps apart along the ray always leave one inside; a shorter chord has
+    // at most the slices around the one at its far end to look at (the same test as the
+    // slice fragments, so a pixel gets a slice or the gap, never both nor neither)
+    if ((range.y - range.x) * per_t > 2.0 * u_step) discard;
+    int k = int(ceil((u_far_depth - range.y * per_t) / u_step));
+    for (int i = k - 1; i <= k + 2; ++i) {
+        if (sliceInside(i, sliceT(i, cos_theta), range)) discard;
+    }
+    f_color = chordColor(origin, dir, range.x, range.y, u_step);
+    if (f_color.a <= 0.0) discard;
+}
+#endif

@@ -1,4 +1,5 @@
-// Projected tetrahedra, per fragment: the pixel's ray clipped against the cell's four
+// Projected tetrahedra, per fragment (tetra.vert says how each pixel gets one fragment
+// per cell): the pixel's ray clipped against the cell's four
 // planes gives the exact segment through the cell (front and back distance), the cell's
 // linear field gives the scalar at both ends, and the segment is integrated exactly for
 // the piecewise-linear transfer function (common/linear_segment.glsl). GL blends the
@@ -30,8 +31,19 @@
 flat in mat3x4 v_normals;      // the cell's outward plane normals, by component (tetra.vert)
 flat in vec4 v_room;           // plane offsets from the eye: d - n . eye
 flat in vec4 v_field;          // gradient of the linear field, value at the eye
+uniform vec3 u_centre;          // the mean of the mesh's points (relative to its lower corner)
 
 out vec4 frag_color;
+
+// Is the ray, moved towards the mesh's centre (across the ray; if that is no move at
+// all, by a fixed tiny offset), inside the plane with outward normal n that it lies in?
+bool movedInside(vec3 n, vec3 origin, vec3 dir) {
+    vec3 across = u_centre - origin;
+    across -= dot(across, dir) * dir;
+    float towards = dot(n, across);
+    if (towards != 0.0) return towards < 0.0;
+    return n.x != 0.0 ? n.x > 0.0 : n.y != 0.0 ? n.y > 0.0 : n.z > 0.0;
+}
 
 void main() {
     vec3 origin, dir;
@@ -44,8 +56,19 @@ void main() {
     vec3 offset = vec3(0.0);
     vec4 room = v_room;
 #endif
-    // the ray is in a plane's inner half-space where room >= 0; parallel and outside: none
-    if (any(lessThan(mix(vec4(1.0), room, equal(along, vec4(0.0))), vec4(0.0)))) discard;
+    // A ray parallel to a plane is inside where room > 0. One lying in the plane
+    // (room == 0: views along faces and edges) is decided as if it were moved by an
+    // infinitesimal step towards the mesh's centre: the two cells of a shared face hold
+    // exactly opposite planes, so exactly one of them keeps it, and a ray in the boundary
+    // of a convex mesh is kept (closed cells, as the grid's box is).
+    vec4 parallel_room = mix(vec4(1.0), room, equal(along, vec4(0.0)));
+    if (any(lessThan(parallel_room, vec4(0.0)))) discard;
+    if (any(equal(parallel_room, vec4(0.0)))) {    // rare: rays in a face's plane
+        vec4 nx = v_normals[0], ny = v_normals[1], nz = v_normals[2];
+        for (int k = 0; k < 4; ++k) {
+            if (parallel_room[k] == 0.0 && !movedInside(vec3(nx[k], ny[k], nz[k]), origin, dir)) discard;
+        }
+    }
     vec4 t = room / along;
     vec4 exits = mix(vec4(3.0e38), t, greaterThan(along, vec4(0.0)));
     vec4 entries = mix(vec4(0.0), t, lessThan(along, vec4(0.0)));

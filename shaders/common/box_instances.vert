@@ -1,5 +1,6 @@
-// 3D slicing along spherical shells: each instance (0 = farthest shell) draws the box's
-// back faces (or a full-screen triangle); the fragment shader finds the shell on its ray.
+// The volume box's back faces (or, with the eye inside, a full-screen triangle), drawn
+// once per instance: 3D slicing along shells draws one instance per shell and finds the
+// shell on each pixel's ray; the slicing techniques' gap pass draws one.
 #version 330 core
 
 in vec3 a_position;          // unit-cube corner, or NDC for the full-screen triangle
