@@ -172,6 +172,30 @@ def _existing_file(path, kind):
     return path
 
 
+def _named_errors(load):
+    """A loader whose failures on a damaged file (a cut-off array, a broken zip or gzip
+    stream, a header that asks for more than there is) are InputErrors naming the path,
+    not the parsing library's own exceptions."""
+    import functools
+
+    @functools.wraps(load)
+    def guarded(path, *args, **kwargs):
+        try:
+            return load(path, *args, **kwargs)
+        except InputError:
+            raise
+        except (ValueError, TypeError) as e:    # the Volume / TetMesh checks name their field
+            if type(e).__module__.startswith("dvr_gl") or str(e).split(" ")[0] in (
+                    "data", "spacing", "origin", "points", "tets", "scalars"):
+                raise
+            raise InputError("path", f"{os.fspath(path)!r} could not be read: {type(e).__name__}: {e}") from e
+        except Exception as e:                  # EOFError, zipfile.BadZipFile, zlib.error, MemoryError, ...
+            raise InputError("path", f"{os.fspath(path)!r} could not be read (damaged or cut short?): "
+                                     f"{type(e).__name__}: {e}") from e
+    return guarded
+
+
+@_named_errors
 def load_volume(path, shape=None, dtype=None, spacing=None, origin=None, mask_nonfinite=False) -> Volume:
     """Read a volume file (see the module docstring for formats); returns a Volume."""
     path = _existing_file(path, "volume")
@@ -787,6 +811,7 @@ def point_arrays(path) -> dict:
     return {name: _components(a) for name, a in _read_mesh_file(path).arrays.items()}
 
 
+@_named_errors
 def load_mesh(path, scalars=None) -> TetMesh:
     """Read a mesh file (see the module docstring for formats) with the point array
     ``scalars`` (default: the first one-component point array) as the field."""
