@@ -12,9 +12,20 @@
   ``space origin``. The volume is axis-aligned: a direction matrix that is not a positive
   diagonal is not applied (a warning says so), as in VTK's image data without a direction.
 - ``.mhd`` / ``.mha`` -- MetaImage (header plus raw, zlib or local data).
-- anything else, ``.raw`` and ``.raw.gz`` included -- raw samples, x fastest, which need
-  ``shape`` (nz, ny, nx), ``dtype`` (a NumPy name such as ``int16`` or ``>u2`` for big
-  endian) and ``spacing``; a name ending in ``.gz`` is gunzipped first.
+- ``.nii`` / ``.nii.gz`` -- NIfTI-1/2 through nibabel (``pip install "dvr-gl[io]"``; a
+  missing nibabel is an error that says so). The samples as the file's x, y, z index axes
+  (scaled by its slope and intercept), spacing from the voxel sizes, origin from the
+  affine; like NRRD the volume is axis-aligned, and an affine that is not a positive
+  diagonal is not applied (a warning says so).
+- ``.raw``, ``.raw.gz``, ``.bin``, ``.dat`` and names without an extension -- raw samples,
+  x fastest, which need ``shape`` (nz, ny, nx), ``dtype`` (a NumPy name such as ``int16``
+  or ``>u2`` for big endian) and ``spacing``; a name ending in ``.gz`` is gunzipped
+  first. A name in the Open SciVis convention, ``name_XxYxZ_dtype.raw`` (such as
+  ``neghip_66x66x66_uint8.raw``), gives the shape and dtype itself, and spacing 1.
+- ``.vti`` (VTK XML image data), legacy ``.vtk`` with ``DATASET STRUCTURED_POINTS`` and
+  ``.slc`` -- through VTK's own readers (``pip install "dvr-gl[io]"``): the point
+  scalars (or the first point array), spacing and origin from the file.
+- any other extension is an error listing the formats above.
 
 ``spacing`` and ``origin``, when given, replace what the file says. ``shape`` and
 ``dtype`` describe raw files; for self-describing files they are checks. Samples are
@@ -228,7 +239,26 @@ def load_volume(path, shape=None, dtype=None, spacing=None, origin=None, mask_no
             raise InputError("dtype", f"{path!r} holds {data.dtype.name}, not the {dtype.name} given")
         spacing = spacing if spacing is not None else (file_spacing or (1.0, 1.0, 1.0))
         origin = origin if origin is not None else (file_origin or (0.0, 0.0, 0.0))
+    elif lower.endswith((".nii", ".nii.gz")):
+        data, file_spacing, file_origin = _load_nifti(path)
+        if shape is not None and tuple(data.shape) != shape:
+            raise InputError("shape", f"{path!r} holds shape {tuple(data.shape)} (nz, ny, nx), "
+                                      f"not the {shape} given")
+        spacing = spacing if spacing is not None else file_spacing
+        origin = origin if origin is not None else file_origin
+    elif lower.endswith((".vti", ".slc", ".vtk")):
+        data, file_spacing, file_origin = _load_vtk_image(path)
+        spacing = spacing if spacing is not None else file_spacing
+        origin = origin if origin is not None else file_origin
+    elif not _is_raw_name(path):
+        raise InputError("path", f"{path!r}: {os.path.splitext(path)[1]!r} is not a volume format dvr_gl reads; "
+                                 f"it reads {SUPPORTED_VOLUMES}")
     else:
+        named = raw_name_layout(path)
+        if named is not None:     # name_XxYxZ_dtype.raw: the name carries shape and dtype
+            shape = shape if shape is not None else named[0]
+            dtype = dtype if dtype is not None else named[1]
+            spacing = spacing if spacing is not None else (1.0, 1.0, 1.0)
         missing = [n for n, v in (("shape", shape), ("dtype", dtype), ("spacing", spacing)) if v is None]
         if missing:
             raise InputError(missing[0], f"a raw file such as {path!r} needs shape (nz,ny,nx), dtype and "
@@ -237,6 +267,90 @@ def load_volume(path, shape=None, dtype=None, spacing=None, origin=None, mask_no
         origin = origin if origin is not None else (0.0, 0.0, 0.0)
     data = _volume_dtype(data, path)
     return Volume(data, spacing=spacing, origin=origin, mask_nonfinite=mask_nonfinite)
+
+
+SUPPORTED_VOLUMES = (".npy, .npz, .nrrd/.nhdr, .mhd/.mha, .nii/.nii.gz (with nibabel), .vti, .slc and "
+                     "structured-points .vtk (with VTK), and raw samples "
+                     "(.raw, .raw.gz, .bin, .dat, or no extension; with shape, dtype and spacing unless the "
+                     "name is name_XxYxZ_dtype.raw); meshes: .vtu, legacy .vtk and what meshio reads")
+_RAW_EXTENSIONS = (".raw", ".raw.gz", ".bin", ".dat", ".gz")
+_RAW_NAME = re.compile(r"_(\d+)x(\d+)x(\d+)_(uint8|int8|uint16|int16|uint32|int32|float32|float64)"
+                       r"\.raw(\.gz)?$", re.IGNORECASE)
+
+
+def raw_name_layout(path):
+    """((nz, ny, nx), dtype) from a name in the Open SciVis convention
+    ``name_XxYxZ_dtype.raw[.gz]`` (little-endian samples, x fastest), or None."""
+    m = _RAW_NAME.search(os.path.basename(os.fspath(path)))
+    if m is None:
+        return None
+    x, y, z = (int(v) for v in m.groups()[:3])
+    return (z, y, x), np.dtype(m.group(4).lower()).newbyteorder("<")
+
+
+def _is_raw_name(path):
+    name = os.path.basename(path).lower()
+    stem, ext = os.path.splitext(name)
+    return name.endswith(_RAW_EXTENSIONS) or ext == "" or ext[1:].isdigit()
+
+
+def _load_vtk_image(path):
+    """(data (nz, ny, nx), spacing, origin) of VTK image data -- XML ``.vti``, legacy
+    ``.vtk`` structured points, ``.slc`` -- through VTK's own readers."""
+    lower = path.lower()
+    if lower.endswith(".vtk") and _vtk_dataset(path) not in ("STRUCTURED_POINTS", None):
+        raise InputError("path", f"{path!r} is a legacy VTK {_vtk_dataset(path)}; load_volume reads "
+                                 "STRUCTURED_POINTS (load_mesh reads UNSTRUCTURED_GRID)")
+    try:
+        from vtkmodules.util.numpy_support import vtk_to_numpy
+        from vtkmodules.vtkIOImage import vtkSLCReader
+        from vtkmodules.vtkIOLegacy import vtkStructuredPointsReader
+        from vtkmodules.vtkIOXML import vtkXMLImageDataReader
+    except ImportError:
+        raise InputError("path", f"{path!r} is VTK image data, which needs VTK: pip install \"dvr-gl[io]\" "
+                                 "(or pip install vtk)") from None
+    reader = (vtkXMLImageDataReader() if lower.endswith(".vti") else vtkSLCReader() if lower.endswith(".slc")
+              else vtkStructuredPointsReader())
+    reader.SetFileName(path)
+    reader.Update()
+    image = reader.GetOutput()
+    points = image.GetPointData() if image is not None else None
+    scalars = points.GetScalars() if points is not None else None
+    if scalars is None and points is not None and points.GetNumberOfArrays():
+        scalars = points.GetArray(0)
+    if scalars is None or image.GetNumberOfPoints() == 0:
+        raise InputError("path", f"{path!r}: VTK read no image with point scalars from it")
+    if scalars.GetNumberOfComponents() != 1:
+        raise InputError("path", f"{path!r}: the scalars {scalars.GetName()!r} have "
+                                 f"{scalars.GetNumberOfComponents()} components; a volume has one")
+    nx, ny, nz = image.GetDimensions()
+    data = vtk_to_numpy(scalars).reshape(nz, ny, nx).copy()
+    return data, tuple(float(v) for v in image.GetSpacing()), tuple(float(v) for v in image.GetOrigin())
+
+
+def _load_nifti(path):
+    """(data (nz, ny, nx), spacing, origin) of a NIfTI file, through nibabel."""
+    try:
+        import nibabel
+    except ImportError:
+        raise InputError("path", f"{path!r} is NIfTI, which needs nibabel: pip install \"dvr-gl[io]\" "
+                                 "(or pip install nibabel)") from None
+    image = nibabel.load(path)
+    data = np.asanyarray(image.dataobj)
+    if data.ndim == 4 and data.shape[3] == 1:
+        data = data[..., 0]
+    if data.ndim != 3:
+        raise InputError("path", f"{path!r} holds a {data.ndim}-D image of shape {data.shape}; a volume is 3-D")
+    zooms = tuple(float(v) for v in image.header.get_zooms()[:3])
+    if not all(v > 0 and math.isfinite(v) for v in zooms):
+        raise InputError("pixdim", f"{path!r} has voxel sizes {zooms}; they must be positive")
+    affine = np.asarray(image.affine, np.float64)
+    linear = affine[:3, :3]
+    if not np.allclose(linear, np.diag(np.diag(linear))) or (np.diag(linear) <= 0).any():
+        warnings.warn(f"{path}: the affine's axes are not x, y, z with positive steps; the volume is shown "
+                      "axis-aligned in index order, without that orientation", stacklevel=3)
+    origin = tuple(float(v) for v in affine[:3, 3])
+    return np.ascontiguousarray(np.transpose(data, (2, 1, 0))), zooms, origin
 
 
 def _volume_dtype(data, path):

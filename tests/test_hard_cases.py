@@ -490,7 +490,11 @@ def _valid_files(folder):
     mesh = dvr_gl.TetMesh.from_points(pts, pts[:, 0])
     meshio.write(folder / "m.vtu", meshio.Mesh(mesh.points, [("tetra", mesh.tets)], point_data={"s": mesh.scalars}))
     np.savez(folder / "m.npz", points=mesh.points, tets=mesh.tets, s=mesh.scalars)
-    return [("v.npy", {}), ("v.nrrd", {}), ("v.mha", {}),
+    import nibabel
+    nibabel.save(nibabel.Nifti1Image(np.transpose(data, (2, 1, 0)), np.diag([1.0, 1.0, 2.0, 1.0])),
+                 str(folder / "v.nii.gz"))
+    (folder / "v_6x5x4_float32.raw").write_bytes(data.astype("<f4").tobytes())
+    return [("v.npy", {}), ("v.nrrd", {}), ("v.mha", {}), ("v.nii.gz", {}), ("v_6x5x4_float32.raw", {}),
             ("v.raw.gz", {"shape": (4, 5, 6), "dtype": "float32", "spacing": (1, 1, 2)}),
             ("m.vtu", {}), ("m.npz", {})]
 

@@ -653,3 +653,95 @@ def test_default_transfer_functions():
     assert field_tf.unit_distance == data.synthetic().min_spacing == 1.0
     assert head_tf.opacity(0.0) == 0 and head_tf.opacity(1000.0) == 0 and head_tf.opacity(2000.0) > 0.1
     assert field_tf.opacity(0.05) == 0 and field_tf.opacity(1.0) > 0.5
+
+
+# -- the Open SciVis raw names, NIfTI, and formats dvr_gl does not read -------------------------
+
+def test_a_raw_name_in_the_open_scivis_convention_gives_shape_and_dtype(tmp_path):
+    a = (np.arange(5 * 4 * 3, dtype=np.int16).reshape(5, 4, 3) - 20)
+    p = tmp_path / "part_3x4x5_int16.raw"
+    p.write_bytes(a.astype("<i2").tobytes())
+    v = load_volume(p)
+    assert v.data.shape == (5, 4, 3) and v.data.dtype == np.int16 and np.array_equal(v.data, a)
+    assert v.spacing.tolist() == [1, 1, 1]
+    assert load_volume(p, spacing=(1, 2, 3)).spacing.tolist() == [1, 2, 3]      # options still win
+    g = tmp_path / "part_3x4x5_float32.raw.gz"
+    g.write_bytes(gzip.compress(a.astype("<f4").tobytes()))
+    assert np.array_equal(load_volume(g).data, a.astype(np.float32))
+    short = tmp_path / "cut_3x4x6_int16.raw"                                    # the name promises more
+    short.write_bytes(a.astype("<i2").tobytes())
+    with pytest.raises(InputError, match="shape|size|bytes"):
+        load_volume(short)
+
+
+@pytest.mark.parametrize("name,shape,dtype", [("vtk_neghip/neghip_66x66x66_uint8.raw", (66, 66, 66), np.uint8),
+                                              ("vtk_hydrogen/hydrogen_64x64x64_float32.raw", (64, 64, 64), np.float32)])
+def test_shared_raw_files_load_by_their_names(name, shape, dtype):
+    v = load_volume(os.path.join(SHARED, name))
+    assert v.data.shape == shape and v.data.dtype == dtype and v.data.max() > v.data.min()
+
+
+def test_nifti_through_nibabel(tmp_path):
+    nib = pytest.importorskip("nibabel")
+    xyz = np.arange(3 * 4 * 5, dtype=np.int16).reshape(3, 4, 5)          # x, y, z index order
+    affine = np.diag([1.0, 2.0, 3.0, 1.0])
+    affine[:3, 3] = (-5.0, 6.0, 7.5)
+    p = tmp_path / "v.nii.gz"
+    nib.save(nib.Nifti1Image(xyz, affine), str(p))
+    v = load_volume(p)
+    assert v.data.shape == (5, 4, 3) and np.array_equal(v.data, np.transpose(xyz, (2, 1, 0)))
+    assert v.spacing.tolist() == [1, 2, 3] and v.origin.tolist() == [-5, 6, 7.5]
+    rotated = affine.copy()
+    rotated[:3, :3] = [[0, -2.0, 0], [1.0, 0, 0], [0, 0, 3.0]]
+    nib.save(nib.Nifti1Image(xyz, rotated), str(tmp_path / "r.nii"))
+    with pytest.warns(UserWarning, match="axis-aligned"):
+        load_volume(tmp_path / "r.nii")
+    nib.save(nib.Nifti1Image(np.zeros((3, 4, 5, 2), np.float32), affine), str(tmp_path / "t.nii"))
+    with pytest.raises(InputError, match="4-D"):
+        load_volume(tmp_path / "t.nii")
+
+
+def test_shared_mri_loads():
+    pytest.importorskip("nibabel")
+    v = load_volume(os.path.join(SHARED, "debian_mricron_colin27", "ch2.nii.gz"))
+    assert v.data.shape == (181, 217, 181) and v.spacing.tolist() == [1, 1, 1]
+
+
+def test_a_format_dvr_gl_does_not_read_is_named_with_the_ones_it_does(tmp_path):
+    p = tmp_path / "image.tif"
+    p.write_bytes(b"II*\x00")
+    with pytest.raises(InputError) as e:
+        load_volume(p)
+    assert e.value.field == "path" and ".tif" in str(e.value) and ".nrrd" in str(e.value) and ".nii" in str(e.value)
+
+
+def test_vtk_image_data_through_vtk():
+    """.vti, legacy structured points and .slc through VTK's readers: the shared files
+    hold the same samples as their raw companions."""
+    pytest.importorskip("vtk")
+    vti = load_volume(os.path.join(SHARED, "vtk_hydrogen", "hydrogen.vti"))
+    assert np.array_equal(vti.data, load_volume(os.path.join(SHARED, "vtk_hydrogen",
+                                                             "hydrogen_64x64x64_float32.raw")).data)
+    slc = load_volume(os.path.join(SHARED, "vtk_neghip", "neghip.slc"))
+    assert np.array_equal(slc.data, load_volume(os.path.join(SHARED, "vtk_neghip", "neghip_66x66x66_uint8.raw")).data)
+    carotid = load_volume(os.path.join(SHARED, "vtk_carotid", "carotid.vtk"))
+    assert carotid.data.shape == (45, 49, 76) and carotid.origin.tolist() == [100, 80, 1]
+    with pytest.raises(InputError, match="UNSTRUCTURED_GRID"):
+        load_volume(os.path.join(SHARED, "vtk_post_tets", "post.vtk"))
+
+
+def test_vtk_image_data_written_here(tmp_path):
+    vtk = pytest.importorskip("vtk")
+    from vtkmodules.util.numpy_support import numpy_to_vtk
+    a = np.arange(3 * 4 * 5, dtype=np.int16).reshape(5, 4, 3)       # (nz, ny, nx)
+    image = vtk.vtkImageData()
+    image.SetDimensions(3, 4, 5)
+    image.SetSpacing(0.5, 1.0, 2.0)
+    image.SetOrigin(1.0, -2.0, 3.0)
+    image.GetPointData().SetScalars(numpy_to_vtk(a.ravel(), deep=True))
+    writer = vtk.vtkXMLImageDataWriter()
+    writer.SetFileName(str(tmp_path / "a.vti"))
+    writer.SetInputData(image)
+    writer.Write()
+    v = load_volume(tmp_path / "a.vti")
+    assert np.array_equal(v.data, a) and v.spacing.tolist() == [0.5, 1, 2] and v.origin.tolist() == [1, -2, 3]
