@@ -391,7 +391,7 @@ def cmd_info_file(args, out=None):
             raise UsageError("--dtype", e.detail) from None
     mesh = input_is_mesh(args)
     _check_input_options(args, mesh)
-    data, _ = _load_input(args)
+    data, preset = _load_input(args)
     if mesh:
         arrays = dvr_io.point_arrays(args.input)
         chosen = _scalars_name(args, arrays)
@@ -414,7 +414,25 @@ def cmd_info_file(args, out=None):
         print("bounds     " + ", ".join(f"{axis} {a:g}..{b:g}" for axis, a, b in zip("xyz", lo, hi)), file=out)
         print(f"range      {data.data_range[0]:g}..{data.data_range[1]:g}"
               + (" (non-finite samples masked)" if data.has_nonfinite else ""), file=out)
+    values = data.scalars if mesh else data.data
+    print("histogram  " + text_histogram(values) + f"  ({data.data_range[0]:g} to {data.data_range[1]:g}, "
+          "32 bins, height ~ log count)", file=out)
+    print(f"preset     {_describe_tf(preset, PRESETS[preset](data))} (what render uses without --tf)", file=out)
     return 0
+
+
+def text_histogram(values, bins=32):
+    """A one-line histogram of the finite values: one block character per bin, its height
+    the bin's count on a log scale (so sparse tails still show)."""
+    import numpy as np
+    v = np.asarray(values, np.float64).ravel()
+    v = v[np.isfinite(v)]
+    if v.size == 0:
+        return "(no finite value)"
+    counts, _ = np.histogram(v, bins=bins, range=(v.min(), v.max()) if v.max() > v.min() else None)
+    levels = " \u2581\u2582\u2583\u2584\u2585\u2586\u2587\u2588"
+    scaled = np.log1p(counts) / np.log1p(counts.max())
+    return "".join(levels[int(round(s * (len(levels) - 1)))] if c else " " for s, c in zip(scaled, counts))
 
 
 def zero_volume_count(mesh):

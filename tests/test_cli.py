@@ -586,3 +586,19 @@ def test_pareto_front():
     rows = [{"scene": "a", "ms_median": t, "rmse": e} for t, e in ((1, 5), (2, 3), (3, 4), (4, 1), (2, 3.5))]
     rows.append({"scene": "b", "ms_median": 9, "rmse": 9})
     assert [(r["ms_median"], r["rmse"]) for r in pareto(rows)] == [(1, 5), (2, 3), (4, 1), (9, 9)]
+
+
+def test_info_file_shows_a_histogram_and_the_preset(tiny, tiny_mesh, capsys):
+    from dvr_gl.cli import text_histogram
+    d, _ = tiny
+    code, out, err = _run(["info", d / "tiny.npy"], capsys)
+    assert code == 0, err
+    lines = {line.split()[0]: line for line in out.splitlines() if line.strip()}
+    assert "32 bins" in lines["histogram"] and lines["preset"].startswith("preset     auto (")
+    dm, _ = tiny_mesh
+    code, out, err = _run(["info", dm / "tiny.vtu"], capsys)
+    assert code == 0 and "histogram" in out and "preset" in out, err
+    # one character per bin, empty bins blank, the fullest bin the full block
+    bar = text_histogram(np.r_[np.zeros(1000), np.full(10, 5.0), [10.0]], bins=4)
+    assert len(bar) == 4 and bar[0] == "\u2588" and bar[1] == " " and bar[2] != " " and bar[3] != " "
+    assert text_histogram(np.array([np.nan])) == "(no finite value)"
