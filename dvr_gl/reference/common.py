@@ -155,6 +155,50 @@ def chord_color(segment, a, b, max_step):
     return acc
 
 
+def segment_colors(plan, sample, valid, a, b, lut_exact=False):
+    """Premultiplied RGBA of the segments [a, b] of the rays: a midpoint sample with
+    opacity corrected for the length, or the pre-integrated table. ``sample(t)`` and
+    ``valid(t)`` (None without masking) evaluate the field and the masked-cell test at
+    ray distances ``t``."""
+    if plan.preint is not None:
+        out = plan.preint.segment(sample(a), sample(b), b - a)
+        if valid is not None:
+            out[~valid(0.5 * (a + b))] = 0
+        return out
+    tm = 0.5 * (a + b)
+    out = classified_segment(*classifier(plan, lut_exact), sample(tm), (b - a) / plan.scene.tf.unit_distance)
+    if valid is not None:
+        out[~valid(tm)] = 0
+    return out
+
+
+def gap_pass(acc, gap, rays, plan, max_step, lut_exact=False):
+    """The slicing techniques' gap pass (GLSL ``slice_gap.glsl`` and its callers): the
+    rays where ``gap`` is set get their whole chord, in pieces of at most ``max_step``,
+    blended into ``acc`` as the target stores it. ``rays`` is ``box_rays(scene)``."""
+    o, d, t0, t1 = rays
+    rows = np.nonzero(gap)[0]
+    if rows.size == 0:
+        return
+    volume = plan.scene.volume
+    values = volume.values(np.float64)
+    lo, _ = volume.bounds
+
+    def segment(sub, a, b):
+        oo, dd = o[rows[sub]], d[rows[sub]]
+
+        def sample(tt):
+            return trilinear(values, (oo + tt[:, None] * dd) / volume.spacing)
+
+        def valid(tt):
+            return cell_is_valid(volume, world_to_index(volume, oo + tt[:, None] * dd + lo))
+        return segment_colors(plan, sample, valid if volume.has_nonfinite else None, a, b, lut_exact)
+
+    src = chord_color(segment, t0[rows], t1[rows], max_step)
+    src[src[:, 3] <= 0] = 0
+    acc[rows] = blend_over(acc[rows], src, plan.target)
+
+
 def round_to_target(x, target):
     """What a render target of format ``target`` stores for the float values ``x``.
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .common import blend_over, box_rays, cell_is_valid, chord_color, classified_segment, classifier, trilinear, world_to_index
+from .common import blend_over, box_rays, cell_is_valid, gap_pass, classified_segment, classifier, trilinear, world_to_index
 
 
 def render_plan(plan, lut_exact=False):
@@ -85,25 +85,5 @@ def render_plan(plan, lut_exact=False):
     for shift in range(5):
         j = j_lo + shift
         gap &= ~((j <= j_hi) & inside(j, slice_t(j)))
-    rows = np.nonzero(gap)[0]
-    if rows.size:
-        o_gap, d_gap = o[rows], d[rows]
-
-        def segment(sub, a, b):
-            oo, dd = o_gap[sub], d_gap[sub]
-
-            def at(tt):
-                return trilinear(values, (oo + tt[:, None] * dd) / volume.spacing)
-            if plan.preint is None:
-                out = classified_segment(classify, transparency, at(0.5 * (a + b)), (b - a) / scene.tf.unit_distance)
-            else:
-                out = plan.preint.segment(at(a), at(b), b - a)
-            if volume.has_nonfinite:
-                mid = oo + (0.5 * (a + b))[:, None] * dd + lo
-                out[~cell_is_valid(volume, world_to_index(volume, mid))] = 0
-            return out
-
-        src = chord_color(segment, t0[rows], t1[rows], plan.slice_distance)
-        src[src[:, 3] <= 0] = 0
-        acc[rows] = blend_over(acc[rows], src, plan.target)
+    gap_pass(acc, gap, (o, d, t0, t1), plan, plan.slice_distance, lut_exact)
     return acc.reshape(H, W, 4)

@@ -8,23 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .common import blend_over, box_rays, cell_is_valid, chord_color, classified_segment, classifier, trilinear, world_to_index
-
-
-def segment_colors(plan, sample, valid, a, b, lut_exact=False):
-    """Premultiplied RGBA of the segments [a, b] of the rays: a midpoint sample with
-    opacity corrected for the length, or the pre-integrated table. ``sample(t)`` and
-    ``valid(t)`` evaluate the field and the masked-cell test at ray distances ``t``."""
-    if plan.preint is not None:
-        out = plan.preint.segment(sample(a), sample(b), b - a)
-        if valid is not None:
-            out[~valid(0.5 * (a + b))] = 0
-        return out
-    tm = 0.5 * (a + b)
-    out = classified_segment(*classifier(plan, lut_exact), sample(tm), (b - a) / plan.scene.tf.unit_distance)
-    if valid is not None:
-        out[~valid(tm)] = 0
-    return out
+from .common import blend_over, box_rays, cell_is_valid, gap_pass, segment_colors, trilinear, world_to_index
 
 
 def render_plan(plan, lut_exact=False):
@@ -84,21 +68,5 @@ def render_plan(plan, lut_exact=False):
         with np.errstate(divide="ignore", invalid="ignore"):
             t = (plan.far_depth - k * plan.step) / per_t
         gap &= ~((k >= 0) & (k < plan.count) & (t > 0) & (t >= t0) & (t <= t1))
-    rows = np.nonzero(gap)[0]
-    if rows.size:
-        o_gap, d_gap = o[rows], d[rows]
-
-        def segment(sub, a, b):
-            oo, dd = o_gap[sub], d_gap[sub]
-
-            def sample(tt):
-                return trilinear(values, (oo + tt[:, None] * dd) / volume.spacing)
-
-            def valid_cells(tt):
-                return cell_is_valid(volume, world_to_index(volume, oo + tt[:, None] * dd + lo))
-            return segment_colors(plan, sample, valid_cells if volume.has_nonfinite else None, a, b, lut_exact)
-
-        src = chord_color(segment, t0[rows], t1[rows], plan.step)
-        src[src[:, 3] <= 0] = 0
-        acc[rows] = blend_over(acc[rows], src, plan.target)
+    gap_pass(acc, gap, (o, d, t0, t1), plan, plan.step, lut_exact)
     return acc.reshape(H, W, 4)
