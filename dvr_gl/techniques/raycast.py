@@ -3,8 +3,10 @@
 About this technique
 --------------------
 The proxy geometry is the volume box's back faces (front faces culled, so each pixel runs
-the fragment shader once even with the eye close to the box), or one full-screen
-triangle when the eye is inside or nearly on the box. The fragment shader ignores the
+the fragment shader once even with the eye close to the box), grown by twice the
+rasteriser's vertex snapping so that a ray grazing the box is never dropped (the shader
+decides coverage), or one full-screen triangle when the eye is inside or nearly on the
+box. The fragment shader ignores the
 proxy's interpolated values: it rebuilds the pixel-centre ray from ``gl_FragCoord`` and
 the camera basis, so pixels match the NumPy reference's rays exactly in construction.
 

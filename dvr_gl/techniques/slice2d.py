@@ -27,6 +27,11 @@ stack axis the samples on the slices with half slabs at both ends make the trape
 rule, whose error constant is twice the midpoint rule's. Coverage is decided per fragment (the slice quads are
 drawn slightly enlarged and the shader discards what lies outside the slice's rectangle).
 
+Rays that meet no slice inside the box (a chord between two sample planes, at the
+silhouette, or a ray parallel to the slices) are found by a second pass over the box's
+back faces, with the slice fragments' own test, and their whole chord is integrated there
+in pieces of at most one slice distance (``shaders/common/slice_gap.glsl``).
+
 The stack switch: at 45 degrees two stacks are equally close and the image jumps between
 them; ``bench`` and the tests measure the jump (the README has the numbers).
 

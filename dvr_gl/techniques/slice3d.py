@@ -19,7 +19,9 @@ entry or exit instead, so the partial slabs at both ends are accounted for. The 
 is sampled at its midpoint and its opacity corrected for its true length: the midpoint
 rule, as in ray casting, with plane-defined segment ends. A pixel whose ray crosses the
 box between two planes without meeting one inside it (a chord shorter than one step, at
-the silhouette) gets nothing.
+the silhouette, through edges and corners) is found by a second pass over the box's back
+faces, with the slice fragments' own test, and its whole chord is integrated there
+(``shaders/common/slice_gap.glsl``).
 
 Coverage is decided by that per-fragment test, never by rasterisation: the polygons are
 cut from a box inflated by a small margin and fragments outside the true box are

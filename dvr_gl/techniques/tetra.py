@@ -22,9 +22,12 @@ left out of the order and the draw (found once per transfer function); zero-volu
 are sorted but never drawn.
 
 Cracks and double counting. A shared face's plane is stored once and negated for the
-second cell, so the ray leaves one cell exactly where it enters the next; which cell a
-pixel on a shared edge belongs to is GL's rasterisation rule, the same for every
-triangle sharing that edge.
+second cell, so the ray leaves one cell exactly where it enters the next. Whether a ray
+meets a cell is the fragment's own clipping, not rasterisation (which snaps vertices to a
+grid): each cell's outline is grown by twice that snapping (``outline.frag``, one pass
+per view), every fragment of a cell carries its draw slot's depth, and the depth test
+keeps one fragment per cell and pixel (``tetra.vert`` has the details, and how a ray
+lying exactly in a face's plane is given to one cell).
 
 Options (same names in ``dvr_gl.reference.render``)
 ---------------------------------------------------
