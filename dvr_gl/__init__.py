@@ -6,7 +6,7 @@ from .scene import Camera, Scene, TetMesh, TransferFunction, Volume, default_cam
 __version__ = "0.1.0"
 
 __all__ = ["Camera", "Renderer", "Scene", "TetMesh", "TransferFunction", "Volume", "default_camera",
-           "metrics", "reference", "__version__"]
+           "metrics", "reference", "render", "__version__"]
 
 
 def __getattr__(name):
@@ -14,6 +14,9 @@ def __getattr__(name):
     if name == "Renderer":
         from .renderer import Renderer
         return Renderer
+    if name == "render":
+        from .inputs import render
+        return render
     if name in ("reference", "metrics", "io", "transfer"):
         import importlib
         return importlib.import_module(f".{name}", __name__)

@@ -26,39 +26,17 @@ import sys
 import time
 
 from . import io as dvr_io
+from .inputs import PRESETS  # presets and bundled data sets are shared with the viewer and dvr_gl.render
 from .scene import MODES
 
 SORTS = ("mpvo", "centroid")  # dvr_gl.techniques.tetra's orders (imported lazily there)
 
 PROG = "dvr-gl"
 
-#: ``--tf`` presets: name -> function(volume) -> TransferFunction.
-PRESETS = {
-    "auto": lambda volume: _transfer().auto_preset(volume),
-    "ct_head": lambda volume: _data().ct_head_tf(),
-    "synthetic": lambda volume: _data().synthetic_tf(),
-}
-
-#: ``render`` inputs that name a bundled data set: name -> (loader, default preset).
-BUILTINS = {
-    "ct_head": (lambda: _data().ct_head(), "ct_head"),
-    "synthetic": (lambda: _data().synthetic(), "synthetic"),
-}
-
 # Which command-line option an InputError's field stands for.
 _OPTION_OF_FIELD = {"path": "INPUT", "shape": "--shape", "dtype": "--dtype", "spacing": "--spacing",
                     "origin": "--origin", "size": "--size", "background": "--background",
-                    "scalars": "--scalars"}
-
-
-def _transfer():
-    from . import transfer
-    return transfer
-
-
-def _data():
-    from . import data
-    return data
+                    "scalars": "--scalars", "tf": "--tf"}
 
 
 class UsageError(Exception):
@@ -458,47 +436,20 @@ def _reason(exc):
 
 
 def _load_input(args):
-    """The volume (or mesh) and the default preset name."""
+    """The volume (or mesh) and the default preset name (dvr_gl.inputs.load_input)."""
+    from .inputs import load_input
     if input_is_mesh(args):
         return dvr_io.load_mesh(args.input, scalars=getattr(args, "scalars", None)), "auto"
-    if args.input.startswith("builtin:"):
-        name = args.input[len("builtin:"):].replace("-", "_")
-        if name not in BUILTINS:
-            raise UsageError("INPUT", f"no bundled data set {name!r}; there are "
-                                      f"{', '.join('builtin:' + n for n in BUILTINS)}")
-        for option, value in (("--shape", args.shape), ("--dtype", args.dtype)):
-            if value is not None:
-                raise UsageError(option, f"is for raw files, not the bundled {args.input}")
-        loader, preset = BUILTINS[name]
-        volume = loader()
-        if args.spacing is not None or args.origin is not None:
-            from .scene import Volume
-            volume = Volume(volume.data, spacing=args.spacing or volume.spacing,
-                            origin=args.origin or volume.origin)
-        return volume, preset
-    volume = dvr_io.load_volume(args.input, shape=args.shape, dtype=args.dtype, spacing=args.spacing,
-                                origin=args.origin, mask_nonfinite=args.mask_nonfinite)
-    return volume, "auto"
+    return load_input(args.input, shape=args.shape, dtype=args.dtype, spacing=args.spacing, origin=args.origin,
+                      mask_nonfinite=args.mask_nonfinite)
 
 
 def _resolve_tf(spec, volume, default):
-    from .transfer import load_tf_json
-
-    if spec is None:
-        return default, PRESETS[default](volume)
-    key = spec.replace("-", "_")
-    if key in PRESETS:  # a file that happens to have a preset's name: pass it as ./NAME
-        return key, PRESETS[key](volume)
-    if os.path.isfile(spec):
-        try:
-            return spec, load_tf_json(spec)
-        except (ValueError, TypeError) as e:
-            raise UsageError("--tf", str(e)) from None
-        except OSError as e:
-            raise UsageError("--tf", f"cannot read {spec!r}: {e}") from None
-    if spec.lower().endswith(".json"):
-        raise UsageError("--tf", f"no such file {spec!r}")
-    raise UsageError("--tf", f"{spec!r} is neither a preset ({', '.join(PRESETS)}) nor a file")
+    from .inputs import resolve_tf
+    try:
+        return resolve_tf(spec, volume, default)
+    except dvr_io.InputError as e:
+        raise UsageError("--tf", e.detail) from None
 
 
 def _check_out(path):

@@ -1036,7 +1036,7 @@ class Viewer:
 
     def presets(self):
         """The transfer functions keys 1..9 choose: the one given, then the presets."""
-        from .cli import PRESETS
+        from .inputs import PRESETS
 
         items = [(self.settings.tf_name, lambda volume: self.initial_tf)]
         items += [(name, make) for name, make in PRESETS.items()]

@@ -1,0 +1,138 @@
+"""What the front ends share: turning what a user names (a file, a bundled data set, an
+array) into scene data, and a transfer-function name into a transfer function; and
+``dvr_gl.render``, the one-line way to a picture.
+
+The command line (``dvr_gl.cli``), the viewer and :func:`render` use these, so that a
+file, a preset or an error reads the same everywhere. Errors are
+:class:`dvr_gl.io.InputError` with the field that was wrong (``path``, ``shape``,
+``dtype``, ``tf``, ...); the command line names its own option for each field.
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from . import io as dvr_io
+from .io import InputError
+
+
+def _transfer():
+    from . import transfer
+    return transfer
+
+
+def _data():
+    from . import data
+    return data
+
+
+#: transfer-function presets: name -> function(data) -> TransferFunction.
+PRESETS = {
+    "auto": lambda data: _transfer().auto_preset(data),
+    "ct_head": lambda data: _data().ct_head_tf(),
+    "synthetic": lambda data: _data().synthetic_tf(),
+}
+
+#: bundled data sets, named ``builtin:NAME``: name -> (loader, default preset).
+BUILTINS = {
+    "ct_head": (lambda: _data().ct_head(), "ct_head"),
+    "synthetic": (lambda: _data().synthetic(), "synthetic"),
+}
+
+
+def load_input(source, *, scalars=None, shape=None, dtype=None, spacing=None, origin=None, mask_nonfinite=False):
+    """(data, default preset name) for ``source``: a file (a volume, or a mesh as
+    ``dvr_gl.io.is_mesh_file`` tells), ``"builtin:NAME"`` (a bundled data set), a 3-D
+    array (nz, ny, nx), or a ``Volume`` / ``TetMesh`` (returned as it is). ``spacing``
+    and ``origin`` apply to arrays and bundled data too; ``shape`` and ``dtype`` are for
+    raw files."""
+    from .scene import TetMesh, Volume
+    if isinstance(source, (Volume, TetMesh)):
+        return source, "auto"
+    if isinstance(source, np.ndarray):
+        return Volume(source, spacing=spacing or (1.0, 1.0, 1.0), origin=origin or (0.0, 0.0, 0.0),
+                      mask_nonfinite=mask_nonfinite), "auto"
+    try:
+        path = os.fspath(source)
+    except TypeError:
+        raise InputError("path", f"expected a file name, 'builtin:NAME', an array or a Volume, "
+                                 f"got {type(source).__name__}") from None
+    if path.startswith("builtin:"):
+        name = path[len("builtin:"):].replace("-", "_")
+        if name not in BUILTINS:
+            raise InputError("path", f"no bundled data set {name!r}; there are "
+                                     f"{', '.join('builtin:' + n for n in BUILTINS)}")
+        for field, value in (("shape", shape), ("dtype", dtype)):
+            if value is not None:
+                raise InputError(field, f"is for raw files, not the bundled {path}")
+        loader, preset = BUILTINS[name]
+        volume = loader()
+        if spacing is not None or origin is not None:
+            volume = Volume(volume.data, spacing=spacing or volume.spacing, origin=origin or volume.origin)
+        return volume, preset
+    if shape is None and dtype is None and dvr_io.is_mesh_file(path):   # raw geometry makes it a volume
+        return dvr_io.load_mesh(path, scalars=scalars), "auto"
+    return dvr_io.load_volume(path, shape=shape, dtype=dtype, spacing=spacing, origin=origin,
+                              mask_nonfinite=mask_nonfinite), "auto"
+
+
+def resolve_tf(spec, data, default="auto"):
+    """(name, TransferFunction) for ``spec``: None (the ``default`` preset), a preset
+    name, a JSON file (``dvr_gl.transfer.load_tf_json``) or a TransferFunction."""
+    from .scene import TransferFunction
+    from .transfer import load_tf_json
+    if isinstance(spec, TransferFunction):
+        return "given", spec
+    if spec is None:
+        return default, PRESETS[default](data)
+    key = str(spec).replace("-", "_")
+    if key in PRESETS:  # a file that happens to have a preset's name: pass it as ./NAME
+        return key, PRESETS[key](data)
+    if os.path.isfile(spec):
+        try:
+            return spec, load_tf_json(spec)
+        except (ValueError, TypeError) as e:
+            raise InputError("tf", str(e)) from None
+        except OSError as e:
+            raise InputError("tf", f"cannot read {spec!r}: {e}") from None
+    if str(spec).lower().endswith(".json"):
+        raise InputError("tf", f"no such file {spec!r}")
+    raise InputError("tf", f"{spec!r} is neither a preset ({', '.join(PRESETS)}) nor a file")
+
+
+_RENDERERS = {}
+
+
+def render(source, *, tf=None, technique=None, size=(512, 512), azimuth=0.0, elevation=0.0, zoom=1.0, fov=30.0,
+           ortho=False, mode="composite", iso=None, scalars=None, spacing=None, backend="auto", **options):
+    """Render ``source`` (anything :func:`load_input` takes) in one call; returns the
+    (height, width, 4) float32 premultiplied RGBA image, row 0 on top.
+
+    >>> image = dvr_gl.render("ct.nrrd", azimuth=30, elevation=20)          # doctest: +SKIP
+    >>> image = dvr_gl.render(np.random.rand(32, 32, 32), tf="auto")          # doctest: +SKIP
+
+    ``tf``: a preset name, a JSON file or a TransferFunction (default: the data's
+    preset). ``technique``: as ``Renderer.render`` (default: raycast for grids, tetra
+    for meshes); its own options (``step``, ``sort``, ``repetitions``, ...) pass through
+    ``options``. The camera is ``dvr_gl.default_camera(data, azimuth, elevation, zoom,
+    fov, ortho)``. One renderer per backend is kept for the process, so later calls do
+    not compile or upload again."""
+    from .renderer import Renderer
+    from .scene import Scene, default_camera
+    data, preset = load_input(source, scalars=scalars, spacing=spacing)
+    _, tf = resolve_tf(tf, data, preset)
+    try:
+        width, height = (int(size), int(size)) if np.isscalar(size) else (int(size[0]), int(size[1]))
+    except (TypeError, ValueError, IndexError):
+        raise InputError("size", f"expected an int or (width, height), got {size!r}") from None
+    scene = Scene(data, tf, default_camera(data, azimuth=azimuth, elevation=elevation, zoom=zoom, fov=fov,
+                                           ortho=ortho),
+                  width=width, height=height, mode=mode, iso_value=iso)
+    if technique is None:
+        technique = "tetra" if scene.is_mesh else "raycast"
+    renderer = _RENDERERS.get(backend)
+    if renderer is None:
+        renderer = _RENDERERS[backend] = Renderer(backend=backend)
+    return renderer.render(scene, technique=technique, **options)
