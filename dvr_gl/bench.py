@@ -161,6 +161,27 @@ def interleaved_frames(calls, repeats, on_frame=None):
     return images, times
 
 
+def renderer_line(info):
+    """``dvr_gl: <GL renderer> (<backend>), LP_NUM_THREADS=<n>``: how a report starts."""
+    return (f"dvr_gl: {info['dvr_gl'].get('renderer')} ({info['dvr_gl'].get('backend')}), "
+            f"LP_NUM_THREADS={os.environ.get('LP_NUM_THREADS', 'unset')}")
+
+
+def turning_frames(frame, scene, turn, repeats):
+    """One untimed frame of ``scene``, then ``repeats`` timed frames, frame i of the view
+    ``turn(i)``, as an orbiting user sees them: per-view work (visibility sorts, depth
+    orders) is inside the time. ``frame(scene)`` must read its image back (so the GL has
+    finished). Returns the seconds of each timed frame."""
+    frame(scene)
+    times = []
+    for i in range(repeats):
+        turned = scene.replace(camera=turn(i))
+        t0 = time.perf_counter()
+        frame(turned)
+        times.append(time.perf_counter() - t0)
+    return times
+
+
 def _row(dataset, scene, label, kind, skip, step_vox, step_world, times, err):
     return {
         "dataset": dataset, "width": scene.width, "height": scene.height,

@@ -18,7 +18,7 @@ read-back inside; after one warm-up frame), the first frame of a new
 renderer (compiling the programs, uploading the data, building the tables), the error
 against ``reference.exact`` at ``--error-size`` (default 128; exact images are cached
 on disk) as RMSE, largest absolute error and PSNR, and the GPU memory the renderer holds
-after the frames (its own bookkeeping: every texture, buffer and target in its caches).
+after the frames (``Renderer.gpu_bytes``: every texture, buffer and target in its caches).
 
 Written with ``--out DIR``: ``all.csv``, ``all.json`` (rows, machine, renderers,
 ``LP_NUM_THREADS``), ``all.md`` (the table), ``all.png`` (time against RMSE per scene,
@@ -31,7 +31,6 @@ from __future__ import annotations
 
 import io
 import math
-import os
 import statistics
 import sys
 import time
@@ -40,7 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from . import metrics
-from .bench import _machine, _vtk_version, error_axes, figure_bytes
+from .bench import _machine, _vtk_version, error_axes, figure_bytes, renderer_line, turning_frames
 from .io import atomic_write
 from .progress import Progress
 
@@ -127,62 +126,7 @@ def scenes(names, size, data_dir=None):
     return out
 
 
-# -- GPU memory bookkeeping ------------------------------------------------------------------------
-_BYTES = {"f1": 1, "u1": 1, "i1": 1, "f2": 2, "u2": 2, "i2": 2, "f4": 4, "u4": 4, "i4": 4}
-
-
-def gpu_bytes(renderer):
-    """Bytes of every texture, buffer and render target the renderer holds in its caches
-    (its own bookkeeping; the driver's own overheads are not counted)."""
-    import moderngl
-    seen = set()
-
-    def size(obj, depth=0):
-        if obj is None or id(obj) in seen or depth > 4:
-            return 0
-        seen.add(id(obj))
-        if isinstance(obj, (moderngl.Texture, moderngl.TextureArray, moderngl.Texture3D)):
-            dims = obj.size if isinstance(obj.size, tuple) else (obj.size,)
-            per = 4 if getattr(obj, "depth", False) else obj.components * _BYTES.get(obj.dtype, 4)
-            return int(np.prod(dims)) * per
-        if isinstance(obj, moderngl.Buffer):
-            return int(obj.size)
-        if isinstance(obj, moderngl.Framebuffer):
-            return sum(size(t, depth + 1) for t in obj.color_attachments) + size(obj.depth_attachment, depth + 1)
-        if isinstance(obj, (moderngl.Context, moderngl.Program, moderngl.VertexArray)):
-            return 0
-        if isinstance(obj, dict):
-            return sum(size(v, depth + 1) for v in obj.values())
-        if isinstance(obj, (list, tuple)):
-            return sum(size(v, depth + 1) for v in obj)
-        items = getattr(obj, "items", None)             # the renderer's LRU caches
-        if isinstance(items, dict):
-            return size(items, depth + 1)
-        if hasattr(obj, "__dict__") and not isinstance(obj, type):
-            return sum(size(v, depth + 1) for k, v in vars(obj).items() if k != "ctx")
-        return 0
-
-    caches = [renderer._volumes, renderer._tfs, renderer._occupancy, renderer._masks, renderer._small,
-              renderer._stacks, renderer._preint, renderer._streams, renderer._targets, renderer._vbos,
-              renderer._resources]
-    return sum(size(c) for c in caches)
-
-
 # -- running ---------------------------------------------------------------------------------------------
-def _timed_frames(call, scene, turn, repeats):
-    """One untimed frame of ``scene``, then ``repeats`` timed frames, each of a new view
-    (``turn(i)``), as an orbiting user sees them: per-view work (visibility sorts, depth
-    orders) is inside the time. Returns the seconds of each timed frame."""
-    call(scene)
-    times = []
-    for i in range(repeats):
-        turned = scene.replace(camera=turn(i))
-        t0 = time.perf_counter()
-        call(turned)
-        times.append(time.perf_counter() - t0)
-    return times
-
-
 def run_all(args, err=None):
     """Run the suite; returns (rows, info, images) with images[(scene, label)] = (image,
     exact) at the error size, for the contact sheet."""
@@ -219,7 +163,7 @@ def run_all(args, err=None):
             t0 = time.perf_counter()
             vtk_frame(scene)
             first = time.perf_counter() - t0
-            times = _timed_frames(vtk_frame, scene, turn, args.repeats)
+            times = turning_frames(vtk_frame, scene, turn, args.repeats)
             image = vtk_frame(small)
             memory = None
         else:
@@ -231,8 +175,8 @@ def run_all(args, err=None):
                 t0 = time.perf_counter()
                 frame(scene)
                 first = time.perf_counter() - t0
-                times = _timed_frames(frame, scene, turn, args.repeats)
-                memory = gpu_bytes(renderer)
+                times = turning_frames(frame, scene, turn, args.repeats)
+                memory = renderer.gpu_bytes()
                 image = frame(small)
             finally:
                 renderer.release()
@@ -373,9 +317,7 @@ def run_all_bench(args) -> int:
         args.error_size = args.error_size or 64
     args.error_size = args.error_size or 128
     rows, info, (images, exact) = run_all(args)
-    print(f"dvr_gl: {info['dvr_gl'].get('renderer')} ({info['dvr_gl'].get('backend')}), "
-          f"LP_NUM_THREADS={os.environ.get('LP_NUM_THREADS', 'unset')}; "
-          f"{info['size']}x{info['size']} frames, median of {info['repeats']}; "
+    print(renderer_line(info) + f"; {info['size']}x{info['size']} frames, median of {info['repeats']}; "
           f"error at {info['error_size']}x{info['error_size']} against reference.exact")
     print(markdown_table(rows))
     if args.out:

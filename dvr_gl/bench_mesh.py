@@ -34,7 +34,7 @@ import time
 import numpy as np
 
 from . import metrics
-from .bench import DEFAULT_DATA_DIR, _fmt, _machine, error_axes, figure_bytes, write_results
+from .bench import DEFAULT_DATA_DIR, _fmt, _machine, error_axes, figure_bytes, renderer_line, write_results
 from .progress import Progress
 from .scene import Scene, TetMesh, TransferFunction, default_camera
 
@@ -241,8 +241,7 @@ def figure_png(rows, info) -> bytes:
 
 def run_mesh_bench(args) -> int:
     rows, info = run_mesh(args)
-    print(f"dvr_gl: {info['dvr_gl'].get('renderer')} ({info['dvr_gl'].get('backend')}), "
-          f"LP_NUM_THREADS={os.environ.get('LP_NUM_THREADS', 'unset')}; frames at {info['size']}x{info['size']} "
+    print(renderer_line(info) + f"; frames at {info['size']}x{info['size']} "
           f"(a new view each frame, median of {info['repeats']}); error at {info['error_size']}x{info['error_size']} "
           "against reference.exact")
     print(format_mesh_table(rows))

@@ -28,7 +28,7 @@ import numpy as np
 
 from . import metrics
 from .cache import TableCache
-from .bench import CHEST_FILE, _fmt, _machine, error_axes, figure_bytes, write_results
+from .bench import CHEST_FILE, _fmt, _machine, error_axes, figure_bytes, renderer_line, turning_frames, write_results
 from .progress import Progress
 from .scene import Scene, default_camera
 
@@ -62,13 +62,8 @@ def _camera(data, name, turn=0.0):
 
 def _timed(gl, scene, name, technique, options, repeats):
     """Median seconds of a frame (render + read-back) over ``repeats`` new views."""
-    times = []
-    for i in range(-1, repeats):
-        turned = scene.replace(camera=_camera(scene.volume, name, 0.5 * (i + 1)))
-        t0 = time.perf_counter()
-        gl.render(turned, technique=technique, **options)
-        if i >= 0:
-            times.append(time.perf_counter() - t0)
+    times = turning_frames(lambda s: gl.render(s, technique=technique, **options), scene,
+                           lambda i: _camera(scene.volume, name, 0.5 * (i + 1)), repeats)
     return statistics.median(times)
 
 
@@ -217,8 +212,7 @@ def figure_png(rows, info) -> bytes:
 
 def run_particles_bench(args) -> int:
     rows, info = run_particles(args)
-    print(f"dvr_gl: {info['dvr_gl'].get('renderer')} ({info['dvr_gl'].get('backend')}), "
-          f"LP_NUM_THREADS={os.environ.get('LP_NUM_THREADS', 'unset')}; frames at {info['size']}x{info['size']} "
+    print(renderer_line(info) + f"; frames at {info['size']}x{info['size']} "
           f"(median of {info['repeats']}, a new view each); error at {info['error_size']}x{info['error_size']} "
           "against reference.exact; gen: per particle set, once per transfer function")
     print(format_particles_table(rows))

@@ -193,12 +193,9 @@ _VOLUME_OPTIONS = (("spacing", "--spacing"), ("origin", "--origin"), ("mask_nonf
 def input_is_mesh(args):
     """Whether INPUT is a mesh (rendered by cell projection) rather than a grid volume.
     Raw geometry (--shape, --dtype) makes it a volume, whatever its extension."""
-    name = getattr(args, "input", None)
-    if not name or name.startswith("builtin:"):
-        return False
-    if getattr(args, "shape", None) is not None or getattr(args, "dtype", None) is not None:
-        return False
-    return dvr_io.is_mesh_file(name)
+    from .inputs import is_mesh_input
+    return is_mesh_input(getattr(args, "input", None) or "", getattr(args, "shape", None),
+                         getattr(args, "dtype", None))
 
 
 def technique_options(args):
@@ -438,10 +435,8 @@ def _reason(exc):
 def _load_input(args):
     """The volume (or mesh) and the default preset name (dvr_gl.inputs.load_input)."""
     from .inputs import load_input
-    if input_is_mesh(args):
-        return dvr_io.load_mesh(args.input, scalars=getattr(args, "scalars", None)), "auto"
-    return load_input(args.input, shape=args.shape, dtype=args.dtype, spacing=args.spacing, origin=args.origin,
-                      mask_nonfinite=args.mask_nonfinite)
+    return load_input(args.input, scalars=getattr(args, "scalars", None), shape=args.shape, dtype=args.dtype,
+                      spacing=args.spacing, origin=args.origin, mask_nonfinite=args.mask_nonfinite)
 
 
 def _resolve_tf(spec, volume, default):

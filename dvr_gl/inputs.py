@@ -42,6 +42,18 @@ BUILTINS = {
 }
 
 
+def is_mesh_input(source, shape=None, dtype=None):
+    """Whether the named ``source`` is a mesh (rendered by cell projection) rather than a
+    grid volume: a mesh file (``dvr_gl.io.is_mesh_file``), unless raw geometry (``shape``,
+    ``dtype``) makes it a volume whatever its extension."""
+    if not isinstance(source, (str, os.PathLike)):
+        return False
+    path = os.fspath(source)
+    if not path or path.startswith("builtin:") or shape is not None or dtype is not None:
+        return False
+    return dvr_io.is_mesh_file(path)
+
+
 def load_input(source, *, scalars=None, shape=None, dtype=None, spacing=None, origin=None, mask_nonfinite=False):
     """(data, default preset name) for ``source``: a file (a volume, or a mesh as
     ``dvr_gl.io.is_mesh_file`` tells), ``"builtin:NAME"`` (a bundled data set), a 3-D
@@ -72,7 +84,7 @@ def load_input(source, *, scalars=None, shape=None, dtype=None, spacing=None, or
         if spacing is not None or origin is not None:
             volume = Volume(volume.data, spacing=spacing or volume.spacing, origin=origin or volume.origin)
         return volume, preset
-    if shape is None and dtype is None and dvr_io.is_mesh_file(path):   # raw geometry makes it a volume
+    if is_mesh_input(path, shape, dtype):
         return dvr_io.load_mesh(path, scalars=scalars), "auto"
     return dvr_io.load_volume(path, shape=shape, dtype=dtype, spacing=spacing, origin=origin,
                               mask_nonfinite=mask_nonfinite), "auto"

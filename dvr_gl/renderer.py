@@ -99,6 +99,38 @@ class Renderer:
         # The context itself is shared by the process's renderers and stays (see
         # gl.context.shared_context).
 
+    def gpu_bytes(self) -> int:
+        """Bytes of every texture, buffer and render target the renderer holds in its
+        caches (its own bookkeeping; the driver's overheads are not counted)."""
+        import moderngl
+        seen = set()
+
+        def size(obj, depth=0):
+            if obj is None or id(obj) in seen or depth > 4:
+                return 0
+            seen.add(id(obj))
+            if isinstance(obj, (moderngl.Texture, moderngl.TextureArray, moderngl.Texture3D)):
+                dims = obj.size if isinstance(obj.size, tuple) else (obj.size,)
+                per = 4 if getattr(obj, "depth", False) else obj.components * int(obj.dtype[1])
+                return int(np.prod(dims)) * per
+            if isinstance(obj, moderngl.Buffer):
+                return int(obj.size)
+            if isinstance(obj, moderngl.Framebuffer):
+                return sum(size(t, depth + 1) for t in obj.color_attachments) + size(obj.depth_attachment, depth + 1)
+            if isinstance(obj, (moderngl.Context, moderngl.Program, moderngl.VertexArray)):
+                return 0
+            if isinstance(obj, dict):
+                return sum(size(v, depth + 1) for v in obj.values())
+            if isinstance(obj, (list, tuple)):
+                return sum(size(v, depth + 1) for v in obj)
+            if hasattr(obj, "__dict__") and not isinstance(obj, type):   # LRUs, technique resources
+                return sum(size(v, depth + 1) for k, v in vars(obj).items() if k != "ctx")
+            return 0
+
+        caches = (self._volumes, self._tfs, self._occupancy, self._masks, self._small, self._stacks, self._preint,
+                  self._streams, self._targets, self._vbos, self._resources)
+        return sum(size(c) for c in caches)
+
     def info(self) -> dict:
         self._revive()
         with current(self.ctx):  # another library (VTK) may have made its own context current
@@ -131,9 +163,9 @@ class Renderer:
                 part = copy.copy(scene)
                 part.tile = (x0, y0, x1 - x0, y1 - y0)
                 fbo = self._draw(part, technique, step, options)
-                pixels = self.read_target(fbo, x1 - x0, y1 - y0)[::-1]  # rows bottom-up, as GL
-                inner = pixels[y - y0:y - y0 + h, x - x0:x - x0 + w]
-                image[scene.height - y - h:scene.height - y, x:x + w] = inner[::-1]
+                pixels = self.read_target(fbo, x1 - x0, y1 - y0)   # row 0 on top: GL row y1 - 1
+                top = y1 - y - h
+                image[scene.height - y - h:scene.height - y, x:x + w] = pixels[top:top + h, x - x0:x - x0 + w]
                 progress.advance(f"{technique} {scene.width}x{scene.height} in tiles")
             progress.close()
             return image

@@ -246,13 +246,7 @@ class VTKPeer:
         self.mapper.SetAutoAdjustSampleDistances(0)
         self.mapper.SetImageSampleDistance(1.0)
         self.mapper.SetUseJittering(0)
-        self.property = v.vtkVolumeProperty()
-        self.property.SetInterpolationTypeToLinear()
-        self.property.ShadeOff()
-        self.actor = v.vtkVolume()
-        self.actor.SetMapper(self.mapper)
-        self.actor.SetProperty(self.property)
-        self.renderer.AddVolume(self.actor)
+        self.property, self.actor = self._add_volume(self.mapper)
         self._volume = None
         self._tf_key = None
         self._image = None
@@ -394,13 +388,19 @@ class VTKPeer:
             return
         v = self._v
         self.pt_mapper = v.PTMapper()
-        self.pt_property = v.vtkVolumeProperty()
-        self.pt_property.ShadeOff()
-        self.pt_property.SetInterpolationTypeToLinear()
-        self.pt_actor = v.vtkVolume()
-        self.pt_actor.SetMapper(self.pt_mapper)
-        self.pt_actor.SetProperty(self.pt_property)
-        self.renderer.AddVolume(self.pt_actor)
+        self.pt_property, self.pt_actor = self._add_volume(self.pt_mapper)
+
+    def _add_volume(self, mapper):
+        """An unshaded, linearly interpolated volume property and an actor for ``mapper``,
+        added to the renderer: (property, actor)."""
+        prop = self._v.vtkVolumeProperty()
+        prop.SetInterpolationTypeToLinear()
+        prop.ShadeOff()
+        actor = self._v.vtkVolume()
+        actor.SetMapper(mapper)
+        actor.SetProperty(prop)
+        self.renderer.AddVolume(actor)
+        return prop, actor
 
     def _set_mesh(self, mesh):
         if self._mesh is mesh:

@@ -244,6 +244,17 @@ def test_zoom_and_pan(open_viewer):
     assert np.allclose(v.orbit.camera().eye, default.eye) and np.allclose(v.orbit.camera().up, default.true_up)
 
 
+def assert_double_click_on_empty_space_recentres(v, o, clock, lo, hi):
+    """A double click where the ray meets nothing (the window's corner) sets the orbit's
+    target back to the data's centre."""
+    clock[0] += 1.0
+    for _ in range(2):
+        v.on_mouse_button(MOUSE_LEFT, PRESS, 0, 2, 2)
+        v.on_mouse_button(MOUSE_LEFT, RELEASE, 0)
+        clock[0] += 0.1
+    assert np.allclose(o.target, (lo + hi) / 2)
+
+
 def test_double_click_recentres(open_viewer):
     v = head_viewer(open_viewer)
     clock = [100.0]
@@ -263,12 +274,7 @@ def test_double_click_recentres(open_viewer):
     # the picked point is where the ray under the cursor is half opaque: it sits on that ray
     origin, direction = o.ray(80, 60, 160, 120)                   # the centre ray now
     assert np.linalg.norm(np.cross(o.target - origin, direction)) < 1e-6
-    clock[0] += 1.0
-    for _ in range(2):                                           # on empty space: the centre
-        v.on_mouse_button(MOUSE_LEFT, PRESS, 0, 2, 2)
-        v.on_mouse_button(MOUSE_LEFT, RELEASE, 0)
-        clock[0] += 0.1
-    assert np.allclose(o.target, (lo + hi) / 2)
+    assert_double_click_on_empty_space_recentres(v, o, clock, lo, hi)
 
 
 def test_orthographic_toggle(open_viewer, renderer, tmp_path):
@@ -967,12 +973,7 @@ def test_mesh_double_click_recentres(mesh_viewer):
     assert np.all(o.target >= lo - 1e-9) and np.all(o.target <= hi + 1e-9)
     assert np.linalg.norm(o.target - (lo + hi) / 2) > 5.0
     assert np.allclose(o.back, -forward) and o.distance == distance
-    clock[0] += 1.0
-    for _ in range(2):                                  # on empty space: the centre
-        v.on_mouse_button(MOUSE_LEFT, PRESS, 0, 2, 2)
-        v.on_mouse_button(MOUSE_LEFT, RELEASE, 0)
-        clock[0] += 0.1
-    assert np.allclose(o.target, (lo + hi) / 2)
+    assert_double_click_on_empty_space_recentres(v, o, clock, lo, hi)
 
 
 def test_mesh_picking_follows_the_cells():

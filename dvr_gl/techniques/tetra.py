@@ -167,6 +167,7 @@ class MeshTextures:
         pts[:, :3] = mesh.points - lo
         planes = topo.cell_planes().reshape(-1, 4).astype(np.float32)
         field = cell_fields(mesh).reshape(-1, 4).astype(np.float32)
+        self.centre = tuple(mesh.points.mean(axis=0) - lo)   # where rays in a face's plane lean (tetra.frag)
         self.points = _texture(ctx, pts, "f4")
         self.tets = _texture(ctx, topo.tets.astype(np.int32), "i4")
         self.planes = _texture(ctx, planes, "f4")
@@ -259,7 +260,7 @@ def draw(renderer, plan):
                 "t_outline23": outline.color_attachments[1]}
     uniforms = {**camera_uniforms(scene), "u_knot_count": plan.knots.count, "u_inv_unit": plan.knots.inv_unit,
                 "u_target_size": scene.target_size,
-                "u_centre": tuple(mesh.points.mean(axis=0) - mesh.bounds[0])}
+                "u_centre": data.centre}
     bind(prog, textures, uniforms)
     knot_uniforms(prog, plan.knots, plan.defines["KNOT_CAPACITY"])
     prog["u_view_proj"].write(view_proj)
