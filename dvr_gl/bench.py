@@ -592,7 +592,7 @@ def add_arguments(parser):
     parser.add_argument("--no-vtk", action="store_true", help="leave VTK out")
     parser.add_argument("--textures", action="store_true",
                         help="also measure trilinear sampling throughput of float32, float16 and unorm8 textures")
-    parser.add_argument("--suite", choices=("peer", "slicing", "mesh", "particles", "all"), default="peer",
+    parser.add_argument("--suite", choices=("peer", "slicing", "mesh", "particles", "shading", "all"), default="peer",
                         help="all: every technique over its quality parameter on generated and real "
                              "scenes, one report (--datasets ml,head,ball,bluntfin; --out DIR writes "
                              "all.csv/.json/.md/.png and contact.png); peer: the ray caster beside VTK (default); slicing: slice2d (k = 0, 1, 3), "
@@ -600,11 +600,13 @@ def add_arguments(parser):
                              "distance, each with and without pre-integration; mesh: projected "
                              "tetrahedra (MPVO and centroid sort) beside VTK's on the NASA meshes "
                              "and the Delaunay ball (--datasets bluntfin,combustor,loxpost,ball); particles: "
-                             "PBVR at several repetition counts beside raycast (head) and tetra (bluntfin)")
+                             "PBVR at several repetition counts beside raycast (head) and tetra (bluntfin); "
+                             "shading: the cost of lighting in raycast and slice3d beside VTK's ShadeOn, "
+                             "and the lit image's convergence against exact")
     parser.add_argument("--repetitions-list", default="1,4,16,64",
                         help="particles suite: the repetition counts (default 1,4,16,64)")
     parser.add_argument("--error-size", type=int, default=None,
-                        help="mesh and particles suites: image size of the error measurement (default 128; "
+                        help="mesh, particles and shading suites: image size of the error measurement (default 128; "
                              "32 with --quick)")
     parser.add_argument("--data-dir", default=None,
                         help=f"mesh suite: the shared data folder (default $DVR_GL_DATA or {DEFAULT_DATA_DIR})")
@@ -645,6 +647,13 @@ def run_bench(args) -> int:
             print(f"dvr-gl bench: {e}", file=sys.stderr)
             return 2
         return run_particles_bench(args)
+    if args.suite == "shading":
+        from .bench_shading import run_shading_bench
+        if args.error_size is None:
+            args.error_size = 32 if args.quick else 128
+        if args.steps == ",".join(f"{s:g}" for s in STEPS_VOXELS):
+            args.steps = "1,0.5"
+        return run_shading_bench(args)
     if args.suite == "mesh":
         from .bench_mesh import run_mesh_bench
         if args.error_size is None:

@@ -146,6 +146,11 @@ def add_render_options(r):
                    help="slice3d: slice polygons made on the CPU or in the vertex shader (default: cpu)")
     r.add_argument("--shells", action="store_true",
                    help="slice3d: slice along spherical shells around the eye instead of planes")
+    r.add_argument("--shading", action="store_true",
+                   help="light the samples with a Blinn-Phong headlight (composite mode; raycast, slice3d, slice2d)")
+    r.add_argument("--gradients", choices=("on_the_fly", "texture"),
+                   help="with --shading: gradients from six field lookups or one gradient-texture "
+                        "lookup (default: on_the_fly)")
     r.add_argument("--target", choices=("rgba32f", "rgba16f", "rgba8"),
                    help="render target format (default: rgba32f)")
     r.add_argument("--mode", choices=MODES,
@@ -180,7 +185,8 @@ def add_render_options(r):
 TECHNIQUE_OPTIONS = {"interpolate": ("slice2d",), "proxy": ("slice3d",), "shells": ("slice3d",),
                      "preintegrate": ("raycast", "slice2d", "slice3d"), "sort": ("tetra",),
                      "repetitions": ("particles",), "seed": ("particles",), "radius": ("particles", "splat"),
-                     "sampler": ("particles",), "density": ("splat",), "cutoff": ("splat",)}
+                     "sampler": ("particles",), "density": ("splat",), "cutoff": ("splat",),
+                     "gradients": ("raycast", "slice2d", "slice3d")}
 
 #: the techniques that render meshes (cell projection); the others render grid volumes
 MESH_TECHNIQUES = ("tetra",)
@@ -209,7 +215,7 @@ def technique_options(args):
     _check_input_kind(args, mesh)
     kwargs = {"technique": args.technique}
     for name in ("step", "preintegrate", "interpolate", "proxy", "shells", "sort", "repetitions", "seed",
-                 "radius", "sampler", "density", "cutoff", "target"):
+                 "radius", "sampler", "density", "cutoff", "gradients", "target"):
         value = getattr(args, name, None)
         if value is None or value is False:
             continue
@@ -485,6 +491,12 @@ def cmd_render(args, out=None):
         raise UsageError("--iso", "an iso-value is required with --mode isosurface")
     if args.iso is not None and mode != "isosurface":
         raise UsageError("--iso", f"is only used with --mode isosurface, not --mode {mode}")
+    if args.shading and mode not in ("composite", "isosurface"):
+        raise UsageError("--shading", f"lights composite samples (isosurfaces always are), not --mode {mode}")
+    if args.shading and args.technique not in ("raycast", "slice2d", "slice3d"):
+        raise UsageError("--shading", f"applies to --technique raycast, slice3d or slice2d, not {args.technique}")
+    if args.gradients is not None and not (args.shading or mode == "isosurface"):
+        raise UsageError("--gradients", "is only used with --shading (or --mode isosurface)")
     if args.dtype is not None:
         try:
             dvr_io._parse_dtype(args.dtype)
@@ -497,7 +509,8 @@ def cmd_render(args, out=None):
     camera = default_camera(volume, azimuth=args.azimuth, elevation=args.elevation, zoom=args.zoom,
                             fov=args.fov, ortho=args.ortho)
     width, height = args.size
-    scene = Scene(volume, tf, camera, width=width, height=height, mode=mode, iso_value=args.iso)
+    scene = Scene(volume, tf, camera, width=width, height=height, mode=mode, iso_value=args.iso,
+                  shading=args.shading)
     t_load = time.perf_counter() - t0
 
     import dvr_gl

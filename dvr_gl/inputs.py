@@ -118,7 +118,8 @@ _RENDERERS = {}
 
 
 def render(source, *, tf=None, technique=None, size=(512, 512), azimuth=0.0, elevation=0.0, zoom=1.0, fov=30.0,
-           ortho=False, mode="composite", iso=None, scalars=None, spacing=None, backend="auto", **options):
+           ortho=False, mode="composite", iso=None, shading=False, scalars=None, spacing=None, backend="auto",
+           **options):
     """Render ``source`` (anything :func:`load_input` takes) in one call; returns the
     (height, width, 4) float32 premultiplied RGBA image, row 0 on top.
 
@@ -129,7 +130,7 @@ def render(source, *, tf=None, technique=None, size=(512, 512), azimuth=0.0, ele
     preset). ``technique``: as ``Renderer.render`` (default: raycast for grids, tetra
     for meshes); its own options (``step``, ``sort``, ``repetitions``, ...) pass through
     ``options``. The camera is ``dvr_gl.default_camera(data, azimuth, elevation, zoom,
-    fov, ortho)``. One renderer per backend is kept for the process, so later calls do
+    fov, ortho)``; ``shading=True`` lights composite samples. One renderer per backend is kept for the process, so later calls do
     not compile or upload again."""
     from .renderer import Renderer
     from .scene import Scene, default_camera
@@ -141,7 +142,7 @@ def render(source, *, tf=None, technique=None, size=(512, 512), azimuth=0.0, ele
         raise InputError("size", f"expected an int or (width, height), got {size!r}") from None
     scene = Scene(data, tf, default_camera(data, azimuth=azimuth, elevation=elevation, zoom=zoom, fov=fov,
                                            ortho=ortho),
-                  width=width, height=height, mode=mode, iso_value=iso)
+                  width=width, height=height, mode=mode, iso_value=iso, shading=shading)
     if technique is None:
         technique = "tetra" if scene.is_mesh else "raycast"
     renderer = _RENDERERS.get(backend)

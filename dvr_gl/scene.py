@@ -21,6 +21,7 @@ import numpy as np
 
 SUPPORTED_DTYPES = (np.uint8, np.uint16, np.int16, np.float32, np.float64)
 MODES = ("composite", "mip", "minip", "average", "isosurface")
+SHADED_MODES = ("composite", "isosurface")  # modes a lit sample has a meaning in (isosurface always is)
 MAX_IMAGE_SIDE = 65536  # larger than one GL target: rendered in tiles
 
 
@@ -450,9 +451,9 @@ class Scene:
             iso_value = _finite_number("iso_value", iso_value)
         if not isinstance(shading, (bool, np.bool_)):
             raise TypeError(f"shading must be True or False, got {shading!r}")
-        if shading and mode != "isosurface":
-            raise NotImplementedError(
-                f"shading=True for mode={mode!r} is not implemented yet (isosurface mode is always shaded)")
+        if shading and mode not in SHADED_MODES:
+            raise ValueError(f"shading applies to modes {' and '.join(SHADED_MODES)} (a lit sample needs a "
+                             f"position on the ray), got shading=True with mode={mode!r}")
         try:
             phong = tuple(float(v) for v in phong)
         except (TypeError, ValueError):

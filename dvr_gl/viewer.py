@@ -971,8 +971,10 @@ class Viewer:
             result = self._try(lambda: setattr(self, "mode", mode), f"use mode {mode}", quiet=True)
             if result is True:
                 self._touch_overlay()
+                why = "lit" if self.shading else ""
                 self.say(f"mode {mode}" + (f" {self.iso:g}" if mode == "isosurface" else "")
-                         + (f" ({self.technique} cannot render {', '.join(skipped)})" if skipped else ""))
+                         + (f" ({self.technique} cannot render {', '.join(skipped)}{' ' + why if why else ''})"
+                            if skipped else ""))
                 return True
             skipped.append(mode)
         self.say(f"{self.technique} renders only mode {self.mode}")

@@ -365,8 +365,6 @@ class VTKPeer:
             raise ValueError(f"step must be a positive number of world units, got {step!r}")
         if scene.mode not in SUPPORTED_MODES:
             raise NotImplementedError(f"mode {scene.mode!r} is not supported by the VTK peer")
-        if scene.shading and scene.mode != "isosurface":
-            raise NotImplementedError("shaded modes other than isosurface are not supported by the VTK peer")
         if (scene.width, scene.height) != self._size:
             self.window.SetSize(scene.width, scene.height)
             self._size = (scene.width, scene.height)

@@ -122,7 +122,8 @@ def test_camera_rays_through_pixel_centres():
     (dict(mode="xray"), ValueError, "mode must be one of composite, mip, minip, average, isosurface, got 'xray'"),
     (dict(mode="isosurface"), ValueError, "iso_value is required for mode='isosurface', got None"),
     (dict(mode="isosurface", iso_value=np.nan), ValueError, "iso_value must be finite, got nan"),
-    (dict(shading=True), NotImplementedError, "shading=True for mode='composite' is not implemented yet"),
+    (dict(shading=True, mode="mip"), ValueError, "shading applies to modes composite and isosurface .* "
+     "got shading=True with mode='mip'"),
     (dict(shading="on"), TypeError, "shading must be True or False, got 'on'"),
     (dict(phong=(0.3, 0.7, 0.2)), ValueError, "phong must be four finite non-negative numbers"),
     (dict(phong=(0.3, 0.7, -0.2, 32)), ValueError, "phong must be four finite non-negative numbers"),

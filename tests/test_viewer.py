@@ -377,11 +377,16 @@ def test_mode_switching_and_iso(open_viewer, renderer, tmp_path):
     v.refine()
     press(v, "s")
     assert_matches_headless(v, renderer, png(tmp_path / "m.png"))
-    # shading: isosurfaces are shaded anyway; composite refuses until it exists
+    # shading: isosurfaces are shaded anyway; l lights composite samples
     press(v, "m")
     assert v.mode == "composite"
     press(v, "l")
-    assert v.shading or any("cannot switch shading" in m for m in v.messages)
+    assert v.shading and v.render_arguments()[0].shading
+    v.refine()
+    press(v, "s")
+    assert_matches_headless(v, renderer, png(tmp_path / "m.png"))
+    press(v, "m")                                      # mip, minip, average have no lit samples
+    assert v.mode == "isosurface" and "raycast cannot render mip, minip, average lit" in v.messages[-1]
 
 
 def test_slice2d_and_modes_it_cannot_render(open_viewer):
@@ -920,8 +925,8 @@ def test_mesh_orbit_sort_and_modes(mesh_viewer):
     assert "takes no step" in v.messages[-1] and v.render_arguments()[2] is None
     press(v, "p")
     assert "tetra has no preintegrate option" in v.messages[-1]
-    press(v, "l")                                      # composite cannot be shaded: refused
-    assert not v.shading and "cannot switch shading" in v.messages[-1]
+    press(v, "l")                                      # tetra does not light samples: refused
+    assert not v.shading and "cannot switch shading: tetra does not light samples yet" in v.messages[-1]
     for number in range(1, len(v.presets()) + 1):       # every preset, or a message
         press(v, str(number))
         v.refine()

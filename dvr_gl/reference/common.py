@@ -155,18 +155,19 @@ def chord_color(segment, a, b, max_step):
     return acc
 
 
-def segment_colors(plan, sample, valid, a, b, lut_exact=False):
+def segment_colors(plan, sample, valid, a, b, lut_exact=False, light=None):
     """Premultiplied RGBA of the segments [a, b] of the rays: a midpoint sample with
     opacity corrected for the length, or the pre-integrated table. ``sample(t)`` and
     ``valid(t)`` (None without masking) evaluate the field and the masked-cell test at
-    ray distances ``t``."""
+    ray distances ``t``; ``light(segments, t)`` (None when unlit, see
+    ``shading.segment_light``) lights them at their midpoints."""
+    tm = 0.5 * (a + b)
     if plan.preint is not None:
         out = plan.preint.segment(sample(a), sample(b), b - a)
-        if valid is not None:
-            out[~valid(0.5 * (a + b))] = 0
-        return out
-    tm = 0.5 * (a + b)
-    out = classified_segment(*classifier(plan, lut_exact), sample(tm), (b - a) / plan.scene.tf.unit_distance)
+    else:
+        out = classified_segment(*classifier(plan, lut_exact), sample(tm), (b - a) / plan.scene.tf.unit_distance)
+    if light is not None:
+        out = light(out, tm)
     if valid is not None:
         out[~valid(tm)] = 0
     return out
@@ -180,19 +181,21 @@ def gap_pass(acc, gap, rays, plan, max_step, lut_exact=False):
     rows = np.nonzero(gap)[0]
     if rows.size == 0:
         return
+    from .shading import segment_light
     volume = plan.scene.volume
     values = volume.values(np.float64)
     lo, _ = volume.bounds
 
     def segment(sub, a, b):
         oo, dd = o[rows[sub]], d[rows[sub]]
+        light = segment_light(plan.scene, values, oo, dd)
 
         def sample(tt):
             return trilinear(values, (oo + tt[:, None] * dd) / volume.spacing)
 
         def valid(tt):
             return cell_is_valid(volume, world_to_index(volume, oo + tt[:, None] * dd + lo))
-        return segment_colors(plan, sample, valid if volume.has_nonfinite else None, a, b, lut_exact)
+        return segment_colors(plan, sample, valid if volume.has_nonfinite else None, a, b, lut_exact, light)
 
     src = chord_color(segment, t0[rows], t1[rows], max_step)
     src[src[:, 3] <= 0] = 0

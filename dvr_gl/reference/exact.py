@@ -61,7 +61,7 @@ import numpy as np
 
 from ..scene import Scene
 from .common import ray_box
-from .shading import gradient, gradient_epsilon, shade_blinn_phong
+from .shading import gradient, gradient_epsilon, phong_terms, shade_blinn_phong
 
 __all__ = ["exact", "VERSION"]
 
@@ -201,6 +201,10 @@ class _Classified:
     """The transfer function's tables and the composite integrator over pieces on which
     the field is a cubic in the ray parameter: shared by grids and meshes."""
 
+    # lit composite (grids): (diffuse factor, specular term) at world points seen along
+    # dirs; None leaves colours unlit
+    lighting = None
+
     def __init__(self, tf):
         self.tf = tf
         self.inv_u = 1.0 / tf.unit_distance
@@ -249,6 +253,8 @@ class _Classified:
             return OD, C, term
         coef, E, PE = coef[busy], E[busy], PE[busy]
         rows, h = P["rows"][busy], P["h"][busy]
+        # a lit scene: each piece's midpoint, half-length vector and direction (world)
+        geometry = {k: P[k][busy] for k in ("base", "hd", "dir")} if self.lighting else None
         npc = len(busy)
 
         # breakpoints: crossings of knots (s known exactly there) ...
@@ -307,14 +313,17 @@ class _Classified:
         fr = first[srow]
         integrate = (pos < fr) | ((pos == fr) & ~op_a)
         singular = (pos == fr) & ~op_a           # ends where alpha = 1: integrand uses c - c_end
+        geo = None if geometry is None else {k: v[sp] for k, v in geometry.items()}
         cend = np.zeros((ns, 3))
-        cend[singular] = self.tf.color(sb[singular])
+        cend[singular] = self.color_at(sb[singular], tb[singular], geo, singular)
         # a zero-thickness part carrying T * c at the ray's opaque point
         pseudo = np.flatnonzero(pos == fr)
-        pseudo_c = np.where(op_a[pseudo, None], self.tf.color(sa[pseudo]), cend[pseudo])
+        pseudo_c = np.where(op_a[pseudo, None], self.color_at(sa[pseudo], ta[pseudo], geo, pseudo), cend[pseudo])
 
         ii = np.flatnonzero(integrate)
         sub = dict(coef=coef[sp[ii]], crit=E[sp[ii], 1:3], h=h[sp[ii]], m=m[ii], cend=cend[ii])
+        if geo is not None:
+            sub.update({k: v[ii] for k, v in geo.items()})
         # weight of each sub-piece's errors: the ray's transmittance at the window start
         # times a rigorous upper bound of the transmittance from there to the sub-piece
         lower = self.od_lower(sub, np.arange(ii.size), ta[ii], tb[ii])
@@ -368,8 +377,9 @@ class _Classified:
             for b0 in range(0, idx.size, _BATCH):
                 sl = slice(b0, b0 + _BATCH)
                 i = idx[sl]
+                geo = {k: sub[k][i] for k in ("base", "hd", "dir")} if "base" in sub else None
                 ODk[sl], Ck[sl], err[sl] = self.gk(sub["coef"][i], sub["h"][i], sub["m"][i], sub["cend"][i],
-                                                   ta[sl], tb[sl])
+                                                   ta[sl], tb[sl], geo)
             ok = (err * weight[idx] * np.exp(-pre) <= _TOL) | (depth >= _MAX_DEPTH)
             out_sub.append(idx[ok])
             out_ta.append(ta[ok])
@@ -386,8 +396,20 @@ class _Classified:
         return (np.concatenate(out_sub), np.concatenate(out_ta), np.concatenate(out_od),
                 np.concatenate(out_c, axis=0))
 
-    def gk(self, coef, h, m, cend, ta, tb):
-        """K15 optical depth and colour of each part, and max |K15 - G7| of the two."""
+    def color_at(self, s, tau, geo, rows):
+        """The (lit) colour of field values s at piece parameters tau; ``geo`` holds
+        the pieces' geometry (None: unlit), ``rows`` picks the pieces."""
+        c = self.tf.color(s)
+        if geo is None or len(s) == 0:
+            return c
+        points = geo["base"][rows] + tau[:, None] * geo["hd"][rows]
+        diffuse, specular = self.lighting(points, geo["dir"][rows])
+        return c * diffuse[:, None] + specular[:, None]
+
+    def gk(self, coef, h, m, cend, ta, tb, geo=None):
+        """K15 optical depth and colour of each part, and max |K15 - G7| of the two.
+        With ``geo`` (a lit scene) the colour at each node is lit with the gradient
+        there."""
         mid = 0.5 * (ta + tb)
         half = 0.5 * (tb - ta)
         x = mid[:, None] + half[:, None] * _XK
@@ -402,13 +424,22 @@ class _Classified:
         ODk = hw * (tau @ _WK)
         gk = tau * Tk
         gg = tg * Tg
-        # colour is linear in ds on the part: two weighted sums serve all channels
-        G0k, G1k = hw * (gk @ _WK), hw * ((ds * gk) @ _WK)
-        G0g, G1g = hw * (gg @ _WG), hw * ((ds[:, _GI] * gg) @ _WG)
-        c0 = self.c0[m] - cend
-        c1 = self.c1[m]
-        Ck = c0 * G0k[:, None] + c1 * G1k[:, None]
-        Cg = c0 * G0g[:, None] + c1 * G1g[:, None]
+        # colour is linear in ds on the part: two weighted sums serve all channels; lit,
+        # it is c(s) * diffuse + specular, with both terms from the gradient at the node
+        G0k, G0g = hw * (gk @ _WK), hw * (gg @ _WG)
+        diffuse = specular = None
+        if geo is not None:
+            points = geo["base"][:, None, :] + x[..., None] * geo["hd"][:, None, :]
+            diffuse, specular = self.lighting(points, geo["dir"][:, None, :])
+            gk, gg = gk * diffuse, gg * diffuse[:, _GI]
+        D0k, D1k = hw * (gk @ _WK), hw * ((ds * gk) @ _WK)
+        D0g, D1g = hw * (gg @ _WG), hw * ((ds[:, _GI] * gg) @ _WG)
+        c0, c1 = self.c0[m], self.c1[m]
+        Ck = c0 * D0k[:, None] + c1 * D1k[:, None] - cend * G0k[:, None]
+        Cg = c0 * D0g[:, None] + c1 * D1g[:, None] - cend * G0g[:, None]
+        if specular is not None:
+            Ck += (hw * ((tau * Tk * specular) @ _WK))[:, None]
+            Cg += (hw * ((tg * Tg * specular[:, _GI]) @ _WG))[:, None]
         err = np.maximum(np.abs(ODk - hw * (tg @ _WG)), np.abs(Ck - Cg).max(axis=1))
         # with c = 1 the colour integral is 1 - exp(-OD) exactly: a transmittance that
         # falls too fast for the nodes (both rules missing it) shows up here
@@ -430,6 +461,10 @@ class _Exact(_Classified):
         self.spacing = vol.spacing
         self.valid = None if vol.cell_valid is None else vol.cell_valid.ravel()
         super().__init__(scene.tf)
+        if scene.shading and scene.mode == "composite":
+            epsilon = gradient_epsilon(vol)
+            self.lighting = lambda points, dirs: phong_terms(gradient(vol, self.values, points), dirs,
+                                                              scene.phong, epsilon)
 
     # -- traversal ------------------------------------------------------------
     def pieces(self, o, d, tcur, t1, M):
@@ -614,6 +649,11 @@ class _Exact(_Classified):
 
         def step(a, P):
             T = np.exp(-od[a])
+            if self.lighting is not None:
+                r = a[P["rows"]]
+                P["base"] = o[r] + P["tm"][:, None] * d[r]
+                P["hd"] = P["h"][:, None] * d[r]
+                P["dir"] = d[r]
             OD, C, term = self.window(P, T, len(a))
             col[a] += T[:, None] * C
             od[a] += OD
@@ -831,6 +871,9 @@ def exact(scene, cache=True, cache_dir=None) -> np.ndarray:
     reads nor writes it."""
     if not isinstance(scene, Scene):
         raise TypeError(f"scene must be a dvr_gl.Scene, got {type(scene).__name__}")
+    if scene.is_mesh and scene.shading:
+        raise ValueError("shading=True is defined for grids (contract section 6: central differences "
+                         "one spacing apart); a TetMesh scene must be unlit")
     path = None
     if cache:
         directory = _cache_dir(cache_dir)

@@ -11,7 +11,7 @@ import numpy as np
 
 from .common import (box_rays, cell_is_valid, classifier, composite_front_to_back, correct_opacity, trilinear,
                      world_to_index)
-from .shading import gradient, gradient_epsilon, shade_blinn_phong
+from .shading import gradient, gradient_epsilon, shade_blinn_phong, shade_segment
 
 ISO_BISECTION_STEPS = 16  # as ISO_BISECTION_STEPS in shaders/common/isosurface.glsl
 
@@ -67,6 +67,12 @@ def render_plan(plan, lut_exact=False):
 
     m = len(hit)
     mode = scene.mode
+    lit = scene.shading and mode == "composite"
+    epsilon = gradient_epsilon(volume)
+
+    def gradient_at(t, rows):
+        return gradient(volume, values, o[rows] + t[:, None] * d[rows] + lo)
+
     color = np.zeros((m, 3))
     alpha_acc = np.zeros(m)
     s_best = np.full(m, -np.inf if mode == "mip" else np.inf)
@@ -102,6 +108,10 @@ def render_plan(plan, lut_exact=False):
             s_front[start] = sample(a[~have_front[rows]], start)
             s_back = sample(b, rows)
             segment = plan.preint.segment(s_front[rows], s_back, length)
+            if lit:
+                on = segment[:, 3] > 0
+                segment[on] = shade_segment(segment[on], gradient_at(tm[on], rows[on]), d[rows[on]],
+                                            scene.phong, epsilon)
             s_front[rows] = s_back
             have_front[rows] = True
             transmittance = 1 - alpha_acc[rows]  # the over operator on an associated segment
@@ -116,6 +126,11 @@ def render_plan(plan, lut_exact=False):
         if mode == "composite":
             rgba = classify(s)
             alpha = correct_opacity(rgba[:, 3], length * inv_unit, transparency(s))
+            if lit:
+                on = rgba[:, 3] > 0
+                rgba = rgba.copy()
+                rgba[on, :3] = shade_blinn_phong(rgba[on, :3], gradient_at(tm[on], rows[on]), d[rows[on]],
+                                                 scene.phong, epsilon)
             color[rows], alpha_acc[rows] = composite_front_to_back(color[rows], alpha_acc[rows], rgba[:, :3], alpha)
             stop = alpha_acc[rows] >= 1
             if plan.ert_transmittance > 0:
@@ -164,7 +179,7 @@ def render_plan(plan, lut_exact=False):
             p = o[ok] + t_hit[ok, None] * d[ok] + lo
             rgb = np.broadcast_to(classify(np.array([scene.iso_value]))[0, :3], (ok.sum(), 3))
             g = gradient(volume, values, p)
-            result[ok, :3] = shade_blinn_phong(rgb, g, d[ok], scene.phong, gradient_epsilon(volume))
+            result[ok, :3] = shade_blinn_phong(rgb, g, d[ok], scene.phong, epsilon)
             result[ok, 3] = 1.0
     out[hit] = result
     return out.reshape(H, W, 4)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from .common import blend_over, box_rays, cell_is_valid, gap_pass, classified_segment, classifier, trilinear, world_to_index
+from .shading import segment_light
 
 
 def render_plan(plan, lut_exact=False):
@@ -59,6 +60,9 @@ def render_plan(plan, lut_exact=False):
 
         def sample_between(tt):
             return trilinear(values, (oo + tt[:, None] * dd) / volume.spacing)
+        light = segment_light(scene, values, oo, dd)
+        if light is None:
+            light = lambda segments, t: segments           # noqa: E731
 
         if plan.preint is None:
             a = np.where(near_in, 0.5 * (t_near + tj), r0)
@@ -66,11 +70,14 @@ def render_plan(plan, lut_exact=False):
             partial = ~(near_in & far_in)
             s = np.where(partial, sample_between(0.5 * (a + b)), s)
             src = classified_segment(classify, transparency, s, (b - a) / scene.tf.unit_distance)
+            # lit where the sample was taken: the slice point, or the partial slab's midpoint
+            src = light(src, np.where(partial, 0.5 * (a + b), tj))
         else:
             t_far_all = np.where(here, slice_t(j_far), 0)
             s_back = np.where(far_in, sample(j_far, t_far_all)[rows], sample_between(r1))
-            back = plan.preint.segment(s, s_back, np.maximum(np.where(far_in, t_far, r1) - tj, 0))
-            front = plan.preint.segment(sample_between(r0), s, np.maximum(tj - r0, 0))
+            t_back = np.where(far_in, t_far, r1)
+            back = light(plan.preint.segment(s, s_back, np.maximum(t_back - tj, 0)), 0.5 * (tj + t_back))
+            front = light(plan.preint.segment(sample_between(r0), s, np.maximum(tj - r0, 0)), 0.5 * (r0 + tj))
             src = np.where(near_in[:, None], back, blend_over(back, front))
         src[src[:, 3] <= 0] = 0
         acc[rows] = blend_over(acc[rows], src, plan.target)

@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from .common import blend_over, box_rays, cell_is_valid, gap_pass, segment_colors, trilinear, world_to_index
+from .shading import segment_light
 
 
 def render_plan(plan, lut_exact=False):
@@ -47,14 +48,15 @@ def render_plan(plan, lut_exact=False):
         def valid_cells(tt):
             return cell_is_valid(volume, world_to_index(volume, oo + tt[:, None] * dd + lo))
         valid = valid_cells if volume.has_nonfinite else None
+        light = segment_light(scene, values, oo, dd)
 
         if plan.preint is None:
             a = np.where(near_in, 0.5 * (t_near + tk), r0)
             b = np.where(far_in, 0.5 * (tk + t_far), r1)
-            src = segment_colors(plan, sample, valid, a, b, lut_exact)
+            src = segment_colors(plan, sample, valid, a, b, lut_exact, light)
         else:
-            src = segment_colors(plan, sample, valid, tk, np.where(far_in, t_far, r1))
-            front = segment_colors(plan, sample, valid, r0, tk)
+            src = segment_colors(plan, sample, valid, tk, np.where(far_in, t_far, r1), light=light)
+            front = segment_colors(plan, sample, valid, r0, tk, light=light)
             src = np.where(near_in[:, None], src, blend_over(src, front))
         src[src[:, 3] <= 0] = 0
         acc[rows] = blend_over(acc[rows], src, plan.target)

@@ -13,11 +13,19 @@ from ..scene import Scene
 TARGETS = {"rgba32f": "f4", "rgba16f": "f2", "rgba8": "f1"}
 
 
+SHADING_TECHNIQUES = ("raycast", "slice3d", "slice2d")   # those that light composite samples
+GRADIENTS = ("on_the_fly", "texture")
+
+
 def check_scene(scene, technique, modes=None, data="volume"):
     """The scene is a Scene of a data kind the technique renders (``data``: "volume" for a
-    grid, "mesh" for a TetMesh, or a tuple of both) in one of its modes."""
+    grid, "mesh" for a TetMesh, or a tuple of both) in one of its modes, lit only where
+    the technique lights samples."""
     if not isinstance(scene, Scene):
         raise TypeError(f"scene must be a dvr_gl.Scene, got {type(scene).__name__}")
+    if scene.shading and technique not in SHADING_TECHNIQUES:
+        raise ValueError(f"{technique} does not light samples yet: shading=True is rendered by "
+                         f"{', '.join(SHADING_TECHNIQUES)}")
     kinds = (data,) if isinstance(data, str) else tuple(data)      # a technique may take both
     if scene.is_mesh and "mesh" not in kinds:
         raise ValueError(f"{technique} renders a Volume (a grid); this scene holds a TetMesh: "
@@ -93,14 +101,51 @@ def preintegration_uniforms(table):
     return {"u_pi_lo": table.lo, "u_pi_scale": table.scale, "u_pi_size": table.size}
 
 
+def shading_defines(scene, gradients):
+    """The defines of shaders/common/shading.glsl a scene needs: none when its composite
+    samples are unlit; ``gradients`` is "on_the_fly" (six field lookups per lit sample)
+    or "texture" (one lookup in a gradient texture made once per volume: the same
+    gradient, see ``reference.shading.sample_gradients``, for three times the volume's
+    memory)."""
+    if gradients not in GRADIENTS:
+        raise ValueError(f"gradients must be one of {', '.join(GRADIENTS)}, got {gradients!r}")
+    defines = {}
+    if scene.shading and scene.mode == "composite":
+        defines["SHADING"] = 1
+    if scene.shaded and gradients == "texture":
+        defines["GRADIENT_TEXTURE"] = 1
+    return defines
+
+
+def gradient_texture(renderer, volume):
+    """The volume's sample gradients as an RGB32F 3D texture, kept with the volume."""
+    from ..reference.shading import sample_gradients
+
+    def make():
+        g = sample_gradients(volume, volume.values(np.float64)).astype(np.float32)
+        nz, ny, nx = volume.shape
+        tex = renderer.ctx.texture3d((nx, ny, nz), 3, np.ascontiguousarray(g).tobytes(), dtype="f4")
+        tex.filter = (renderer.ctx.LINEAR, renderer.ctx.LINEAR)
+        tex.repeat_x = tex.repeat_y = tex.repeat_z = False
+        return tex
+    return renderer.resource("gradient", volume, make=make)
+
+
 def add_optional_inputs(renderer, plan, textures, uniforms):
-    """Add what a plan's optional features read: the pre-integration table and the
-    masked-cell texture."""
+    """Add what a plan's optional features read: the pre-integration table, the
+    masked-cell texture and the lighting."""
+    from ..reference.shading import gradient_epsilon
+    scene = plan.scene
     if getattr(plan, "preint", None) is not None:
         textures["t_preint"] = renderer.preintegration_texture(plan.preint)
         uniforms.update(preintegration_uniforms(plan.preint))
-    if plan.scene.volume.has_nonfinite:
-        textures["t_cell_valid"] = renderer.cell_valid_texture(plan.scene.volume)
+    if scene.volume.has_nonfinite:
+        textures["t_cell_valid"] = renderer.cell_valid_texture(scene.volume)
+    if scene.shaded and not scene.is_mesh:
+        uniforms["u_phong"] = scene.phong
+        uniforms["u_gradient_epsilon"] = gradient_epsilon(scene.volume)
+        if plan.defines.get("GRADIENT_TEXTURE"):
+            textures["t_gradient"] = gradient_texture(renderer, scene.volume)
 
 
 def bind(prog, textures, uniforms):

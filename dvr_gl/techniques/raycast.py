@@ -42,6 +42,14 @@ preintegrate : composite mode: classify each segment as a whole from the field a
     ends with the pre-integrated table (``dvr_gl.preintegration``; its segment length is
     the step, and the shorter first and last segments are corrected as that module
     says) instead of one midpoint sample.
+gradients : "on_the_fly" (default) | "texture": where a lit sample's gradient comes from
+    (``Scene(shading=True)`` and isosurface mode): six lookups of the field, or one of a
+    gradient texture made once per volume (``techniques.common.shading_defines``).
+
+Shading (``Scene(shading=True)``, composite): each midpoint sample's colour is lit by the
+headlight with the gradient at the sample (``shaders/common/shading.glsl``) before it is
+associated with its opacity; a pre-integrated segment is lit as a whole with the
+gradient at its midpoint. Samples with zero opacity never look up a gradient.
 """
 
 from __future__ import annotations
@@ -53,11 +61,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..cache import TableCache
-from ..reference.shading import gradient_epsilon
 from ..scene import Scene
 from ..transfer import LookupTable
 from .common import (cleared_target, add_optional_inputs, bind, box_proxy, camera_uniforms, check_flag, check_scene,
-                     grow_pixels,
+                     grow_pixels, shading_defines,
                      check_step, check_target, preintegration_table, tf_uniforms, volume_uniforms)
 
 BRICK = 8            # brick edge in cells, for empty-space skipping
@@ -92,7 +99,7 @@ def default_step(volume):
 
 
 def make_plan(scene, step=None, *, target="rgba32f", jitter_seed=None, ert_transmittance=1e-3,
-              skip_empty=True, preintegrate=False, tables=None):
+              skip_empty=True, preintegrate=False, gradients="on_the_fly", tables=None):
     """Validate the options and decide what the scene needs. ``tables`` (a
     ``dvr_gl.cache.TableCache``) keeps the TF's lookup table and the volume's brick
     ranges between frames."""
@@ -138,6 +145,7 @@ def make_plan(scene, step=None, *, target="rgba32f", jitter_seed=None, ert_trans
         defines["MASK_NONFINITE"] = 1
     if preint is not None:
         defines["PREINTEGRATE"] = 1
+    defines.update(shading_defines(scene, gradients))
     return RaycastPlan(scene=scene, step=step, lut=lut, target=target, jitter=jitter,
                        ert_transmittance=ert, occupancy=occupancy, preint=preint, defines=defines)
 
@@ -241,8 +249,6 @@ def draw(renderer, plan):
         uniforms["u_ert_transmittance"] = plan.ert_transmittance
     if scene.mode == "isosurface":
         uniforms["u_iso"] = scene.iso_value
-        uniforms["u_phong"] = scene.phong
-        uniforms["u_gradient_epsilon"] = gradient_epsilon(volume)
     bind(prog, textures, uniforms)
 
     kind, view_proj = box_proxy(scene, grow_pixels=grow_pixels(renderer.ctx))

@@ -42,6 +42,10 @@ target : "rgba32f" (default) | "rgba16f" | "rgba8"; blending rounds in the targe
 preintegrate : classify the segment between consecutive slices with the pre-integrated
     table; the partial segments at the box entry and exit take the field at the entry or
     exit point from the two layers around it.
+gradients : "on_the_fly" (default) | "texture": with ``Scene(shading=True)`` each slab is lit
+    with the gradient where its sample was taken (the slice point, or the midpoint of a
+    partial slab or pre-integrated segment), computed from the stack's two layers around
+    each point (the trilinear field itself) or read from a gradient texture.
 ``step`` is not an option: passing it is an error, since the data fixes the distance.
 """
 
@@ -54,7 +58,7 @@ import numpy as np
 from ..cache import TableCache
 from ..scene import Scene
 from ..transfer import LookupTable
-from .common import (cleared_target, add_optional_inputs, bind, box_depth_range, camera_uniforms, check_flag,
+from .common import (cleared_target, add_optional_inputs, shading_defines, bind, box_depth_range, camera_uniforms, check_flag,
                      draw_box_instances,
                      check_scene, check_target, eye_view_projection, preintegration_table, tf_uniforms,
                      volume_uniforms)
@@ -89,7 +93,8 @@ def stack_axis(forward):
     return int(np.argmax(np.abs(np.asarray(forward, np.float64))))
 
 
-def make_plan(scene, step=None, *, target="rgba32f", interpolate=0, preintegrate=False, tables=None):
+def make_plan(scene, step=None, *, target="rgba32f", interpolate=0, preintegrate=False, gradients="on_the_fly",
+              tables=None):
     tables = tables or TableCache()
     check_scene(scene, "slice2d", modes=MODES)
     if step is not None:
@@ -125,6 +130,7 @@ def make_plan(scene, step=None, *, target="rgba32f", interpolate=0, preintegrate
         defines["PREINTEGRATE"] = 1
     if volume.has_nonfinite:
         defines["MASK_NONFINITE"] = 1
+    defines.update(shading_defines(scene, gradients))
     return Slice2DPlan(scene=scene, lut=lut, axis=axis, interpolate=int(interpolate),
                        slice_distance=slice_distance, count=count, order=order, min_depth=min_depth,
                        target=target, preint=preint, defines=defines)

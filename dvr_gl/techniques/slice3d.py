@@ -41,6 +41,9 @@ shells : slice along spherical shells around the eye (radii ``(j + 0.5) * step``
     box's back faces (or a full-screen triangle with the eye inside).
 preintegrate : classify whole segments between consecutive slices with the pre-integrated
     table (``dvr_gl.preintegration``) instead of midpoint samples.
+gradients : "on_the_fly" (default) | "texture": as for ray casting; with
+    ``Scene(shading=True)`` every segment is lit with the gradient at its midpoint, the
+    gap pass's pieces too.
 """
 
 from __future__ import annotations
@@ -54,7 +57,7 @@ from ..cache import TableCache
 from ..scene import Scene
 from ..transfer import LookupTable
 from . import proxy as proxy_geometry
-from .common import (cleared_target, add_optional_inputs, bind, camera_uniforms, draw_box_instances, check_flag, check_scene,
+from .common import (cleared_target, add_optional_inputs, shading_defines, bind, camera_uniforms, draw_box_instances, check_flag, check_scene,
                      check_step, check_target, eye_view_projection, preintegration_table, tf_uniforms,
                      volume_uniforms)
 
@@ -88,7 +91,7 @@ def default_step(volume):
 
 
 def make_plan(scene, step=None, *, target="rgba32f", proxy="cpu", shells=False, preintegrate=False,
-              tables=None):
+              gradients="on_the_fly", tables=None):
     tables = tables or TableCache()
     check_scene(scene, "slice3d", modes=MODES)
     volume = scene.volume
@@ -120,6 +123,7 @@ def make_plan(scene, step=None, *, target="rgba32f", proxy="cpu", shells=False, 
         defines["PREINTEGRATE"] = 1
     if volume.has_nonfinite:
         defines["MASK_NONFINITE"] = 1
+    defines.update(shading_defines(scene, gradients))
     return Slice3DPlan(scene=scene, step=step, lut=lut, target=target, proxy=proxy, shells=shells,
                        preint=preint, far_depth=float(far_depth), count=int(count), defines=defines)
 

@@ -33,6 +33,9 @@
 #ifndef PREINTEGRATE
 #define PREINTEGRATE 0
 #endif
+#ifndef SHADING
+#define SHADING 0
+#endif
 
 #include "common/camera_ray.glsl"
 #include "common/ray_box.glsl"
@@ -42,8 +45,10 @@
 #if PREINTEGRATE
 #include "common/preintegration.glsl"
 #endif
-#if MODE_ISOSURFACE
+#if MODE_ISOSURFACE || SHADING
 #include "common/shading.glsl"
+#endif
+#if MODE_ISOSURFACE
 #include "common/isosurface.glsl"
 #endif
 
@@ -127,6 +132,9 @@ void main() {
         if (!have_front) s_front = sampleVolume(origin + a * dir);
         float s_back = sampleVolume(origin + b * dir);
         vec4 segment = preintegratedSegment(s_front, s_back, len);
+  #if SHADING
+        if (segment.a > 0.0) segment = shadeSegment(segment, gradient(p), dir);
+  #endif
         s_front = s_back;
         have_front = true;
         color += (1.0 - alpha_acc) * segment.rgb;
@@ -162,6 +170,9 @@ void main() {
         }
         float transparency = rgba.a > 0.5 ? transparencyTF(s) : 1.0 - rgba.a;
         float alpha = correctOpacity(rgba.a, transparency, len * u_inv_unit);
+  #if SHADING
+        rgba.rgb = shadeBlinnPhong(rgba.rgb, gradient(p), dir);
+  #endif
         compositeFrontToBack(color, alpha_acc, rgba.rgb, alpha);
   #if EARLY_RAY_TERMINATION
         if (1.0 - alpha_acc < u_ert_transmittance) break;

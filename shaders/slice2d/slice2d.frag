@@ -12,6 +12,9 @@
 #ifndef GAP
 #define GAP 0
 #endif
+#ifndef SHADING
+#define SHADING 0
+#endif
 
 #include "common/camera_ray.glsl"
 #include "common/ray_box.glsl"
@@ -75,6 +78,20 @@ float sampleBetween(vec3 p) {
     return s * (1.0 - f) + texture(t_stack, vec3(uv, layer + 1.0)).r * f;
 }
 
+#if SHADING
+// Gradients from the stack: sampleBetween is the trilinear field itself.
+#define FIELD_AT sampleBetween
+#include "common/shading.glsl"
+#endif
+
+// A segment lit with the gradient at p (unchanged without shading or opacity).
+vec4 lit(vec4 segment, vec3 p, vec3 dir) {
+#if SHADING
+    if (segment.a > 0.0) return shadeSegment(segment, gradient(p), dir);
+#endif
+    return segment;
+}
+
 #if MASK_NONFINITE
 bool validAt(int j, float t, vec3 origin, vec3 dir) {
     vec3 p = origin + t * dir;
@@ -105,16 +122,23 @@ void main() {
 #if !PREINTEGRATE
     float a = near_inside ? 0.5 * (t_near + t) : range.x;
     float b = far_inside ? 0.5 * (t + t_far) : range.y;
-    if (!(near_inside && far_inside)) s = sampleBetween(origin + (0.5 * (a + b)) * dir);
-    f_color = classifiedSegment(s, (b - a) * u_inv_unit);  // zero for b <= a
+    vec3 p = origin + t * dir;  // where s was sampled
+    p[u_axes.x] = float(j) * u_slice_distance;
+    if (!(near_inside && far_inside)) {
+        p = origin + (0.5 * (a + b)) * dir;
+        s = sampleBetween(p);
+    }
+    f_color = lit(classifiedSegment(s, (b - a) * u_inv_unit), p, dir);  // zero for b <= a
 #else
     // from this slice to the next one behind it (or to the box exit), and in front of
     // the first slice a ray meets, the piece from the box entry
     float s_back = far_inside ? sampleSlice(j + ahead, t_far, origin, dir)
                               : sampleBetween(origin + range.y * dir);
-    vec4 back = preintegratedSegment(s, s_back, max((far_inside ? t_far : range.y) - t, 0.0));
+    float t_back = far_inside ? t_far : range.y;
+    vec4 back = lit(preintegratedSegment(s, s_back, max(t_back - t, 0.0)), origin + (0.5 * (t + t_back)) * dir, dir);
     if (!near_inside) {
-        back = over(preintegratedSegment(sampleBetween(origin + range.x * dir), s, max(t - range.x, 0.0)), back);
+        vec4 front = preintegratedSegment(sampleBetween(origin + range.x * dir), s, max(t - range.x, 0.0));
+        back = over(lit(front, origin + (0.5 * (range.x + t)) * dir, dir), back);
     }
     f_color = back;
 #endif
@@ -128,12 +152,13 @@ vec4 segmentColor(vec3 origin, vec3 dir, float a, float b) {
 #if MASK_NONFINITE
     if (!insideValidCell(p)) return vec4(0.0);
 #endif
-    return classifiedSegment(sampleBetween(p), (b - a) * u_inv_unit);
+    return lit(classifiedSegment(sampleBetween(p), (b - a) * u_inv_unit), p, dir);
 #else
 #if MASK_NONFINITE
     if (!insideValidCell(origin + (0.5 * (a + b)) * dir)) return vec4(0.0);
 #endif
-    return preintegratedSegment(sampleBetween(origin + a * dir), sampleBetween(origin + b * dir), b - a);
+    return lit(preintegratedSegment(sampleBetween(origin + a * dir), sampleBetween(origin + b * dir), b - a),
+               origin + (0.5 * (a + b)) * dir, dir);
 #endif
 }
 

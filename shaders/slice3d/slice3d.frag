@@ -15,6 +15,9 @@
 #ifndef GAP
 #define GAP 0
 #endif
+#ifndef SHADING
+#define SHADING 0
+#endif
 
 #include "common/camera_ray.glsl"
 #include "common/ray_box.glsl"
@@ -22,6 +25,9 @@
 #include "common/classification.glsl"
 #if PREINTEGRATE
 #include "common/preintegration.glsl"
+#endif
+#if SHADING
+#include "common/shading.glsl"
 #endif
 
 uniform vec3 u_extent;        // box size; the box is [0, u_extent]
@@ -55,7 +61,11 @@ vec4 segmentColor(vec3 origin, vec3 dir, float a, float b) {
 #if MASK_NONFINITE
     if (!insideValidCell(p)) return vec4(0.0);
 #endif
-    return classifiedSegment(sampleVolume(p), (b - a) * u_inv_unit);
+    vec4 segment = classifiedSegment(sampleVolume(p), (b - a) * u_inv_unit);
+#if SHADING
+    if (segment.a > 0.0) segment = shadeSegment(segment, gradient(p), dir);
+#endif
+    return segment;
 }
 #else
 vec4 segmentColor(vec3 origin, vec3 dir, float a, float b) {
@@ -64,7 +74,11 @@ vec4 segmentColor(vec3 origin, vec3 dir, float a, float b) {
 #if MASK_NONFINITE
     if (!insideValidCell(0.5 * (pa + pb))) return vec4(0.0);
 #endif
-    return preintegratedSegment(sampleVolume(pa), sampleVolume(pb), b - a);
+    vec4 segment = preintegratedSegment(sampleVolume(pa), sampleVolume(pb), b - a);
+#if SHADING
+    if (segment.a > 0.0) segment = shadeSegment(segment, gradient(0.5 * (pa + pb)), dir);
+#endif
+    return segment;
 }
 #endif
 

@@ -1,0 +1,193 @@
+"""``dvr-gl bench --suite shading``: what lighting costs, beside VTK's shaded ray caster,
+and how accurate the lit image is.
+
+Speed, per data set (the chest CT and the CT head, as in the peer suite) and step (1 and
+1/2 voxel by default, ``--steps``): the median frame time at ``--size`` (512) of
+
+- dvr_gl ``raycast`` and ``slice3d`` unlit, lit with gradients on the fly (six field
+  lookups per lit sample) and lit from the gradient texture (one lookup);
+- VTK's GPU ray caster unlit and with ``ShadeOn()`` (same ka, kd, ks, shininess), at the
+  same step,
+
+all taken round robin within one data set and step (``bench.interleaved_frames``), each
+frame read back. ``cost`` divides a lit row by the same renderer's unlit row. RMSE
+against the exact image (lit or unlit, as the row) at ``--error-size`` (128).
+
+Accuracy: the lit Marschner-Lobb phantom (41^3, ``--error-size``), ``raycast`` and
+``slice3d`` at 1, 1/2, 1/4, 1/8 and 1/16 voxel against ``reference.exact`` (which lights
+every quadrature node with the contract's gradient), the observed convergence order per
+halving, and the float64 midpoint marcher (``reference.render(..., lut_exact=True)``,
+same gradient rule) at 1/4 voxel.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import sys
+
+import numpy as np
+
+from . import metrics
+from .bench import _fmt, _load_datasets, _machine, interleaved_frames, renderer_line, write_results
+from .progress import Progress
+from .scene import Scene
+
+CONFIGS = (  # (label, kind, technique, lit, options)
+    ("raycast", "dvr_gl", "raycast", False, {}),
+    ("raycast lit", "dvr_gl", "raycast", True, {}),
+    ("raycast lit texture", "dvr_gl", "raycast", True, {"gradients": "texture"}),
+    ("slice3d", "dvr_gl", "slice3d", False, {}),
+    ("slice3d lit", "dvr_gl", "slice3d", True, {}),
+    ("slice3d lit texture", "dvr_gl", "slice3d", True, {"gradients": "texture"}),
+    ("VTK GPU raycast", "vtk", None, False, {}),
+    ("VTK GPU raycast ShadeOn", "vtk", None, True, {}),
+)
+CONVERGENCE_STEPS = (1.0, 0.5, 0.25, 0.125, 0.0625)
+CSV_FIELDS = ["dataset", "step_voxels", "renderer", "lit", "width", "ms_median", "ms_min", "cost",
+              "time_vs_vtk", "error_size", "rmse", "max_abs", "psnr"]
+
+
+def _timed_rows(gl, peers, name, scene, step_vox, repeats, progress, exact_images):
+    """Rows for one data set and step: every configuration timed round robin. ``peers``
+    maps lit (False, True) to its own VTK pipeline (switching one pipeline's lighting
+    every frame would time VTK's rebuilds), or is empty."""
+    step = step_vox * scene.volume.min_spacing
+    configs = [c for c in CONFIGS if c[1] != "vtk" or peers]
+    lit_scene = scene.replace(shading=True)
+    calls = []
+    for label, kind, technique, lit, opts in configs:
+        s = lit_scene if lit else scene
+        if kind == "vtk":
+            peers[lit].setup(s, step)
+            calls.append(peers[lit].frame)
+        else:
+            calls.append(functools.partial(gl.render, s, technique=technique, step=step, **opts))
+    _, times = interleaved_frames(calls, repeats, lambda k, i: progress.advance(
+        f"{name} step {step_vox:g}: {configs[k][0]} " + ("warm-up" if i < 0 else f"frame {i + 1}/{repeats}")))
+    rows = []
+    for (label, kind, technique, lit, opts), ts in zip(configs, times):
+        small = exact_images[lit][0]
+        if kind == "vtk":
+            peers[lit].setup(small, step)
+            image = peers[lit].frame()
+        else:
+            image = gl.render(small, technique=technique, step=step, **opts)
+        err = metrics.compare(image, exact_images[lit][1])
+        rows.append({"dataset": name, "step_voxels": step_vox, "renderer": label, "lit": lit,
+                     "width": scene.width, "ms_median": 1e3 * float(np.median(ts)), "ms_min": 1e3 * min(ts),
+                     "error_size": small.width, "rmse": err["rmse"], "max_abs": err["max_abs"],
+                     "psnr": err["psnr"], "cost": None, "time_vs_vtk": None})
+    unlit = {r["renderer"]: r for r in rows if not r["lit"]}
+    vtk = {r["lit"]: r for r in rows if r["renderer"].startswith("VTK")}
+    for r in rows:
+        base = unlit.get(r["renderer"].split(" lit")[0].replace(" ShadeOn", ""))
+        if r["lit"] and base is not None:
+            r["cost"] = r["ms_median"] / base["ms_median"]
+        if r["lit"] in vtk and not r["renderer"].startswith("VTK"):
+            r["time_vs_vtk"] = r["ms_median"] / vtk[r["lit"]]["ms_median"]
+    return rows
+
+
+def convergence(gl, size):
+    """Lit Marschner-Lobb: RMSE against exact per step for raycast and slice3d, the
+    order per halving, and the float64 marcher at 1/4 voxel."""
+    from .phantoms import marschner_lobb, marschner_lobb_tf
+    from .reference import render as reference_render
+    from .reference.exact import exact as exact_image
+    from .scene import default_camera
+    volume = marschner_lobb(41)
+    scene = Scene(volume, marschner_lobb_tf(), default_camera(volume, azimuth=30, elevation=20),
+                  width=size, height=size, shading=True)
+    exact = exact_image(scene)
+    h = volume.min_spacing
+    out = {"steps_voxels": list(CONVERGENCE_STEPS)}
+    for technique in ("raycast", "slice3d"):
+        opts = {"ert_transmittance": 0.0} if technique == "raycast" else {}
+        errors = [metrics.rmse(gl.render(scene, technique=technique, step=k * h, **opts), exact)
+                  for k in CONVERGENCE_STEPS]
+        out[technique] = errors
+        out[technique + "_orders"] = [math.log2(a / b) for a, b in zip(errors, errors[1:])]
+    out["marcher_quarter"] = metrics.rmse(
+        reference_render(scene, "raycast", step=0.25 * h, lut_exact=True, ert_transmittance=0.0), exact)
+    return out
+
+
+def run_shading(args, err=None):
+    err = err if err is not None else sys.stderr
+    import dvr_gl
+    from .reference.exact import exact as exact_image
+    names = [n.strip() for n in args.datasets.split(",") if n.strip()]
+    steps = [float(s) for s in args.steps.split(",") if s.strip()]
+    peers = {}
+    if not args.no_vtk:
+        try:
+            from .vtk_peer import VTKPeer
+            peers = {False: VTKPeer(), True: VTKPeer()}
+        except ImportError as e:
+            print(f"dvr-gl bench: VTK not available ({e}); VTK rows skipped", file=err)
+    sets = _load_datasets(names, args.chest, err)
+    n_configs = sum(1 for c in CONFIGS if c[1] != "vtk" or peers)
+    progress = Progress(len(sets) * (2 + len(steps) * n_configs * (1 + args.repeats)) + 1, stream=err)
+    rows, info = [], {}
+    try:
+        with dvr_gl.Renderer(backend=args.backend) as gl:
+            info["dvr_gl"] = gl.info()
+            for name, volume, tf, camera in sets:
+                scene = Scene(volume, tf, camera, width=args.size, height=args.size)
+                exact_images = {}
+                for lit in (False, True):
+                    small = Scene(volume, tf, camera, width=args.error_size, height=args.error_size, shading=lit)
+                    progress.begin(f"{name}: exact image{' (lit)' if lit else ''}")
+                    exact_images[lit] = (small, exact_image(small))
+                    progress.advance(f"{name}: exact image{' (lit)' if lit else ''}")
+                for step_vox in steps:
+                    rows.extend(_timed_rows(gl, peers, name, scene, step_vox, args.repeats, progress, exact_images))
+            progress.begin("lit Marschner-Lobb convergence")
+            info["convergence"] = convergence(gl, args.error_size)
+            progress.advance("lit Marschner-Lobb convergence")
+    finally:
+        progress.close()
+        if peers:
+            info["vtk"] = {"renderer": peers[False].renderer_string()}
+        for peer in peers.values():
+            peer.close()
+    info.update(_machine(), size=args.size, error_size=args.error_size, repeats=args.repeats, suite="shading",
+                datasets=[n for n, *_ in sets], steps_voxels=steps)
+    return rows, info
+
+
+def format_shading_table(rows):
+    head = ("data", "step (voxel)", "renderer", "ms/frame", "cost", "t/VTK", "RMSE", "max err")
+    lines = [(r["dataset"], f"{r['step_voxels']:g}", r["renderer"], _fmt(r["ms_median"], ".1f"),
+              _fmt(r["cost"], ".2f"), _fmt(r["time_vs_vtk"], ".2f"), _fmt(r["rmse"], ".2e"),
+              _fmt(r["max_abs"], ".3f")) for r in rows]
+    widths = [max(len(h), *(len(l[i]) for l in lines)) if lines else len(h) for i, h in enumerate(head)]
+    fmt = lambda cells: "| " + " | ".join(c.ljust(w) for c, w in zip(cells, widths)) + " |"   # noqa: E731
+    return "\n".join([fmt(head), "|" + "|".join("-" * (w + 2) for w in widths) + "|"] + [fmt(l) for l in lines])
+
+
+def format_convergence(c):
+    lines = ["lit Marschner-Lobb against exact (RMSE), steps " + ", ".join(f"{k:g}" for k in c["steps_voxels"])
+             + " voxel:"]
+    for technique in ("raycast", "slice3d"):
+        lines.append(f"  {technique:8s} " + " ".join(f"{e:.2e}" for e in c[technique])
+                     + "   orders " + " ".join(f"{o:.2f}" for o in c[technique + "_orders"]))
+    q = CONVERGENCE_STEPS.index(0.25)
+    lines.append(f"  float64 marcher at 1/4 voxel {c['marcher_quarter']:.2e}: raycast "
+                 f"{c['raycast'][q] / c['marcher_quarter']:.2f}x, slice3d {c['slice3d'][q] / c['marcher_quarter']:.2f}x")
+    return "\n".join(lines)
+
+
+def run_shading_bench(args) -> int:
+    rows, info = run_shading(args)
+    vtk = info.get("vtk", {}).get("renderer", "not run")
+    print(f"{renderer_line(info)}; VTK: {vtk}; {info['size']}x{info['size']}, median of {info['repeats']} "
+          f"frames; cost = lit / unlit of the same renderer; t/VTK = / VTK's row with the same lighting; "
+          f"RMSE at {info['error_size']}x{info['error_size']}")
+    print(format_shading_table(rows))
+    print(format_convergence(info["convergence"]))
+    if args.out:
+        paths = write_results(rows, info, args.out, fields=CSV_FIELDS)
+        print("wrote " + ", ".join(str(p) for p in paths))
+    return 0
