@@ -105,6 +105,11 @@ def _background_value(text):
 _background = _arg_type(_background_value, "background")
 
 
+def _light(text):
+    from .inputs import parse_light
+    return _arg_type(parse_light, "light")(text)
+
+
 # ----------------------------------------------------------------------------- the parser
 
 def add_render_options(r):
@@ -148,6 +153,10 @@ def add_render_options(r):
                    help="slice3d: slice along spherical shells around the eye instead of planes")
     r.add_argument("--shading", action="store_true",
                    help="light the samples with a Blinn-Phong headlight (composite mode; raycast, slice3d, slice2d)")
+    r.add_argument("--light", type=_light, action="append", metavar="SPACE:X,Y,Z[:I]",
+                   help="with --shading: a directional light towards X,Y,Z in world or view space "
+                        "(world:1,1,0, view:-1,1,1:0.5) or headlight[:I]; repeat for up to 4 "
+                        "(default: the headlight)")
     r.add_argument("--gradients", choices=("on_the_fly", "texture"),
                    help="with --shading: gradients from six field lookups or one gradient-texture "
                         "lookup (default: on_the_fly)")
@@ -495,6 +504,10 @@ def cmd_render(args, out=None):
         raise UsageError("--shading", f"lights composite samples (isosurfaces always are), not --mode {mode}")
     if args.shading and args.technique not in ("raycast", "slice2d", "slice3d"):
         raise UsageError("--shading", f"applies to --technique raycast, slice3d or slice2d, not {args.technique}")
+    if args.light and not (args.shading or mode == "isosurface"):
+        raise UsageError("--light", "is only used with --shading (or --mode isosurface)")
+    if args.light and len(args.light) > 4:
+        raise UsageError("--light", f"at most 4 lights, got {len(args.light)}")
     if args.gradients is not None and not (args.shading or mode == "isosurface"):
         raise UsageError("--gradients", "is only used with --shading (or --mode isosurface)")
     if args.dtype is not None:
@@ -510,7 +523,7 @@ def cmd_render(args, out=None):
                             fov=args.fov, ortho=args.ortho)
     width, height = args.size
     scene = Scene(volume, tf, camera, width=width, height=height, mode=mode, iso_value=args.iso,
-                  shading=args.shading)
+                  shading=args.shading, **({"lights": tuple(args.light)} if args.light else {}))
     t_load = time.perf_counter() - t0
 
     import dvr_gl

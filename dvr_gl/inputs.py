@@ -114,12 +114,29 @@ def resolve_tf(spec, data, default="auto"):
     raise InputError("tf", f"{spec!r} is neither a preset ({', '.join(PRESETS)}) nor a file")
 
 
+def parse_light(text):
+    """A light from text: ``headlight``, ``world:X,Y,Z`` or ``view:X,Y,Z`` (the direction
+    towards the light), each optionally followed by ``:INTENSITY``."""
+    from .scene import Light
+    parts = str(text).strip().split(":")
+    space = parts[0].strip().lower()
+    try:
+        if space == "headlight" and len(parts) <= 2:
+            return Light(intensity=float(parts[1]) if len(parts) == 2 else 1.0)
+        if space in Light.SPACES and len(parts) in (2, 3):
+            direction = dvr_io.parse_triplet(parts[1], "light")
+            return Light(direction, space=space, intensity=float(parts[2]) if len(parts) == 3 else 1.0)
+    except ValueError as e:
+        raise InputError("light", f"{e} in {text!r}") from None
+    raise InputError("light", f"expected headlight[:I], world:X,Y,Z[:I] or view:X,Y,Z[:I], got {text!r}")
+
+
 _RENDERERS = {}
 
 
 def render(source, *, tf=None, technique=None, size=(512, 512), azimuth=0.0, elevation=0.0, zoom=1.0, fov=30.0,
-           ortho=False, mode="composite", iso=None, shading=False, scalars=None, spacing=None, backend="auto",
-           **options):
+           ortho=False, mode="composite", iso=None, shading=False, lights=None, scalars=None, spacing=None,
+           backend="auto", **options):
     """Render ``source`` (anything :func:`load_input` takes) in one call; returns the
     (height, width, 4) float32 premultiplied RGBA image, row 0 on top.
 
@@ -130,7 +147,8 @@ def render(source, *, tf=None, technique=None, size=(512, 512), azimuth=0.0, ele
     preset). ``technique``: as ``Renderer.render`` (default: raycast for grids, tetra
     for meshes); its own options (``step``, ``sort``, ``repetitions``, ...) pass through
     ``options``. The camera is ``dvr_gl.default_camera(data, azimuth, elevation, zoom,
-    fov, ortho)``; ``shading=True`` lights composite samples. One renderer per backend is kept for the process, so later calls do
+    fov, ortho)``; ``shading=True`` lights composite samples (``lights``: a ``dvr_gl.Light`` or
+    a list of them; the headlight by default). One renderer per backend is kept for the process, so later calls do
     not compile or upload again."""
     from .renderer import Renderer
     from .scene import Scene, default_camera
@@ -142,7 +160,8 @@ def render(source, *, tf=None, technique=None, size=(512, 512), azimuth=0.0, ele
         raise InputError("size", f"expected an int or (width, height), got {size!r}") from None
     scene = Scene(data, tf, default_camera(data, azimuth=azimuth, elevation=elevation, zoom=zoom, fov=fov,
                                            ortho=ortho),
-                  width=width, height=height, mode=mode, iso_value=iso, shading=shading)
+                  width=width, height=height, mode=mode, iso_value=iso, shading=shading,
+                  **({} if lights is None else {"lights": lights}))
     if technique is None:
         technique = "tetra" if scene.is_mesh else "raycast"
     renderer = _RENDERERS.get(backend)

@@ -425,12 +425,65 @@ class Camera:
         return f"Camera(eye={tuple(self.eye.tolist())}, target={tuple(self.target.tolist())}, up={tuple(self.up.tolist())}, {proj})"
 
 
+class Light:
+    """A light for lit scenes (``Scene(shading=True)`` and isosurfaces).
+
+    ``Light()`` is the headlight: at every sample the light comes from the eye, along
+    the ray (L = V), as the contract's default. ``Light(direction, space)`` is a
+    directional light: ``direction`` points from the scene towards the light (the L of
+    N.L), in world coordinates (``space="world"``) or in the camera's (``space="view"``:
+    x right, y up, z towards the viewer). ``intensity`` scales its diffuse and specular
+    terms (the ambient term is the scene's, once)."""
+
+    SPACES = ("world", "view")
+
+    def __init__(self, direction=None, space="world", intensity=1.0):
+        if space not in self.SPACES:
+            raise ValueError(f"space must be one of {', '.join(self.SPACES)}, got {space!r}")
+        if direction is not None:
+            direction = _vector3("direction", direction)
+            length = float(np.linalg.norm(direction))
+            if length == 0:
+                raise ValueError(f"direction must not be the zero vector, got {tuple(direction.tolist())!r}")
+            direction = direction / length
+            direction.setflags(write=False)
+        self.direction = direction
+        self.space = space
+        self.intensity = _finite_number("intensity", intensity)
+        if self.intensity < 0:
+            raise ValueError(f"intensity must be non-negative, got {intensity!r}")
+
+    @property
+    def is_headlight(self):
+        return self.direction is None
+
+    def world_direction(self, camera):
+        """The unit direction towards the light in world coordinates (None: headlight)."""
+        if self.direction is None or self.space == "world":
+            return self.direction
+        x, y, z = self.direction
+        return x * camera.right + y * camera.true_up - z * camera.forward
+
+    def key(self):
+        return (None if self.direction is None else self.direction.tobytes(), self.space, self.intensity)
+
+    def __repr__(self):
+        if self.direction is None:
+            return "Light()" if self.intensity == 1.0 else f"Light(intensity={self.intensity})"
+        return (f"Light({tuple(round(v, 6) for v in self.direction.tolist())}, space={self.space!r}, "
+                f"intensity={self.intensity})")
+
+
+MAX_LIGHTS = 4
+HEADLIGHT = Light()
+
+
 class Scene:
     """What to render: a volume (a ``Volume`` grid or a ``TetMesh``), its classification,
     a camera, an image size and a mode."""
 
     def __init__(self, volume, tf, camera, width=512, height=512, mode="composite",
-                 iso_value=None, shading=False, phong=(0.3, 0.7, 0.2, 32.0)):
+                 iso_value=None, shading=False, phong=(0.3, 0.7, 0.2, 32.0), lights=(HEADLIGHT,)):
         if not isinstance(volume, (Volume, TetMesh)):
             raise TypeError(f"volume must be a dvr_gl.Volume or dvr_gl.TetMesh, got {type(volume).__name__}")
         for name, value, cls in (("tf", tf, TransferFunction), ("camera", camera, Camera)):
@@ -460,9 +513,18 @@ class Scene:
             raise TypeError(f"phong must be (ka, kd, ks, shininess), got {phong!r}") from None
         if len(phong) != 4 or not all(math.isfinite(v) and v >= 0 for v in phong):
             raise ValueError(f"phong must be four finite non-negative numbers (ka, kd, ks, shininess), got {phong!r}")
+        if isinstance(lights, Light):
+            lights = (lights,)
+        try:
+            lights = tuple(lights)
+        except TypeError:
+            raise TypeError(f"lights must be a dvr_gl.Light or a sequence of them, got {lights!r}") from None
+        if not 1 <= len(lights) <= MAX_LIGHTS or not all(isinstance(l, Light) for l in lights):
+            raise ValueError(f"lights must be 1 to {MAX_LIGHTS} dvr_gl.Light objects, got {lights!r}")
         self.volume = volume
         self.tf = tf
         self.camera = camera
+        self.lights = lights
         self.width = int(width)
         self.height = int(height)
         self.mode = mode
@@ -491,6 +553,11 @@ class Scene:
         return isinstance(self.volume, TetMesh)
 
     @property
+    def headlight_only(self):
+        """True for the contract's default light: one headlight of intensity 1."""
+        return len(self.lights) == 1 and self.lights[0].is_headlight and self.lights[0].intensity == 1.0
+
+    @property
     def shaded(self):
         """True when samples are lit (isosurface mode always is)."""
         return self.shading or self.mode == "isosurface"
@@ -499,7 +566,7 @@ class Scene:
         """A copy with some fields changed (validated again)."""
         args = dict(volume=self.volume, tf=self.tf, camera=self.camera, width=self.width,
                     height=self.height, mode=self.mode, iso_value=self.iso_value,
-                    shading=self.shading, phong=self.phong)
+                    shading=self.shading, phong=self.phong, lights=self.lights)
         args.update(changes)
         return Scene(**args)
 
@@ -510,6 +577,8 @@ class Scene:
         for part in (self.tf.key(), self.camera.key(),
                      (self.width, self.height, self.mode, self.iso_value, self.shading, self.phong)):
             h.update(repr(part).encode())
+        if not self.headlight_only:   # the default light leaves earlier digests (and caches) as they were
+            h.update(repr(tuple(light.key() for light in self.lights)).encode())
         return h.hexdigest()
 
     def __repr__(self):

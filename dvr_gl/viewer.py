@@ -458,6 +458,8 @@ class Settings:
     vsync: bool = True
     visible: bool = True
     options: dict = field(default_factory=dict)   # technique options (preintegrate, interpolate, ...)
+    shading: bool = False                # lit composite (key l switches it)
+    lights: tuple | None = None          # dvr_gl.Light objects; None: the headlight
 
 
 @dataclass
@@ -499,7 +501,8 @@ class Viewer:
         self.initial_tf = settings.tf
         self.mode = settings.mode
         self.iso = settings.iso if settings.iso is not None else self._default_iso()
-        self.shading = False
+        self.shading = settings.shading
+        self.lights = settings.lights
         self.step = settings.step          # None: the technique's default
         self.options = dict(settings.options)  # technique options: command line, then keys
         self.technique = settings.technique
@@ -694,7 +697,7 @@ class Viewer:
     def _scene(self, width, height, tf=None):
         return Scene(self.volume, tf or self.tf, self.orbit.camera(), width=width, height=height,
                      mode=self.mode, iso_value=self.iso if self.mode == "isosurface" else None,
-                     shading=self.shading)
+                     shading=self.shading, **({"lights": self.lights} if self.lights else {}))
 
     def _options(self, name=None):
         info = self.techniques[name or self.technique]
@@ -1462,7 +1465,8 @@ def settings_from_args(args) -> Settings:
                     azimuth=args.azimuth, elevation=args.elevation, zoom=args.zoom, fov=args.fov,
                     ortho=args.ortho, background=args.background, screenshot=screenshot,
                     tf_out=args.tf_out, editor=not args.hide_editor, vsync=args.frames is None,
-                    options=options)
+                    options=options, shading=bool(getattr(args, "shading", False)),
+                    lights=tuple(args.light) if getattr(args, "light", None) else None)
 
 
 def open_viewer(argv) -> Viewer:

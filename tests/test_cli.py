@@ -118,6 +118,11 @@ BAD = [
     (["--shading", "--technique", "particles"], "--shading", "not particles"),
     (["--gradients", "texture"], "--gradients", "only used with --shading"),
     (["--gradients", "sobel"], "argument --gradients", "'sobel'"),
+    (["--light", "world:1,1,0"], "--light", "only used with --shading"),
+    (["--shading", "--light", "sun:1,1,0"], "argument --light", "'sun:1,1,0'"),
+    (["--shading", "--light", "world:0,0,0"], "argument --light", "zero vector"),
+    (["--shading", "--light", "view:1,1,1:-2"], "argument --light", "non-negative"),
+    (["--shading"] + ["--light", "headlight"] * 5, "--light", "at most 4 lights"),
 ]
 
 
@@ -623,6 +628,12 @@ def test_render_shading_writes_what_the_library_renders(renderer, tiny, capsys):
         _, px = _png(out)
         assert np.array_equal(px, to_png_array(renderer.render(lit, **options)))
         assert not np.array_equal(px, to_png_array(renderer.render(lit.replace(shading=False), **options)))
+    out = d / "lights.png"
+    code, _, err = _run(["render", d / "tiny.npy", "--size", "32x32", "--azimuth", "30", "--shading",
+                         "--light", "world:1,1,0", "--light", "view:0,0,1:0.5", "--out", out], capsys)
+    assert code == 0, err
+    lights = (dvr_gl.Light((1, 1, 0)), dvr_gl.Light((0, 0, 1), space="view", intensity=0.5))
+    assert np.array_equal(_png(out)[1], to_png_array(renderer.render(lit.replace(lights=lights))))
 
 
 def test_shading_bench_quick_run(tmp_path, capsys):

@@ -1,6 +1,8 @@
 """Every bad input to the scene model fails at construction with a message that names
 the parameter and the value."""
 
+import re
+
 import numpy as np
 import pytest
 
@@ -127,6 +129,10 @@ def test_camera_rays_through_pixel_centres():
     (dict(shading="on"), TypeError, "shading must be True or False, got 'on'"),
     (dict(phong=(0.3, 0.7, 0.2)), ValueError, "phong must be four finite non-negative numbers"),
     (dict(phong=(0.3, 0.7, -0.2, 32)), ValueError, "phong must be four finite non-negative numbers"),
+    (dict(lights=()), ValueError, r"lights must be 1 to 4 dvr_gl.Light objects, got \(\)"),
+    (dict(lights=[dvr_gl.Light()] * 5), ValueError, "lights must be 1 to 4 dvr_gl.Light objects"),
+    (dict(lights=("headlight",)), ValueError, r"lights must be 1 to 4 dvr_gl.Light objects, got \('headlight',\)"),
+    (dict(lights=3), TypeError, "lights must be a dvr_gl.Light or a sequence of them, got 3"),
 ])
 def test_scene_rejects(kwargs, exc, message):
     args = dict(volume=VOL, tf=TF, camera=CAM)
@@ -226,3 +232,29 @@ def test_tetmesh_from_points_delaunay():
     assert abs(np.abs(m.signed_volumes()).sum() - ConvexHull(pts).volume) < 1e-12
     with pytest.raises(ValueError, match="cannot be tetrahedralised"):
         dvr_gl.TetMesh.from_points(np.c_[pts[:, :2], np.zeros(60)], pts[:, 0])
+
+
+@pytest.mark.parametrize("kwargs,exc,message", [
+    (dict(direction=(0, 0, 0)), ValueError, "direction must not be the zero vector, got (0.0, 0.0, 0.0)"),
+    (dict(direction=(1, 0)), ValueError, "direction must have 3 components"),
+    (dict(direction=(1, 0, float("nan"))), ValueError, "direction must be finite"),
+    (dict(direction=(1, 0, 0), space="eye"), ValueError, "space must be one of world, view, got 'eye'"),
+    (dict(intensity=-1), ValueError, "intensity must be non-negative, got -1"),
+    (dict(intensity="bright"), TypeError, "intensity must be a number, got 'bright'"),
+])
+def test_light_rejects(kwargs, exc, message):
+    with pytest.raises(exc, match=re.escape(message)):
+        dvr_gl.Light(**kwargs)
+
+
+def test_light_directions():
+    cam = dvr_gl.Camera((0, 0, 10), (0, 0, 0))
+    assert dvr_gl.Light().is_headlight and dvr_gl.Light().world_direction(cam) is None
+    np.testing.assert_allclose(dvr_gl.Light((0, 0, 5)).direction, (0, 0, 1))
+    # view space: x right, y up, z towards the viewer
+    turned = dvr_gl.Camera((10, 0, 0), (0, 0, 0))
+    np.testing.assert_allclose(dvr_gl.Light((0, 0, 1), space="view").world_direction(turned), (1, 0, 0), atol=1e-12)
+    np.testing.assert_allclose(dvr_gl.Light((0, 1, 0), space="view").world_direction(turned), (0, 1, 0), atol=1e-12)
+    scene = dvr_gl.Scene(VOL, TF, CAM)
+    assert scene.headlight_only and scene.replace(lights=dvr_gl.Light()).digest() == scene.digest()
+    assert not scene.replace(lights=dvr_gl.Light(intensity=0.5)).headlight_only

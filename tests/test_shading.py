@@ -61,14 +61,16 @@ def gradient_floor(volume):
 
 def lit_tolerance(plan, unlit, g_floor):
     """Bound on |GL - reference| of a lit image, from the unlit bound ``unlit`` of the same
-    plan. A lit associated colour is ``c a D + a S`` with D = ka + kd N.L <= 1 (defaults) and
-    S = ks (N.L)^n <= ks, so value and table errors cost at most (1 + ks) times the unlit
-    bound. On top, N.L moves by at most 2 |dg| / |g| + 16u, with |dg| from each of the six
+    plan. A lit associated colour is ``c a D + a S`` with D = ka + kd sum I |N.L| and
+    S = ks sum I |N.H|^n (sums over the lights, intensities I), so value and table errors
+    cost at most ka + (kd + ks) sum I times the unlit bound. On top, N.L and N.H move by at
+    most 2 |dg| / |g| + 16u (L, H are exact), with |dg| from each of the six
     field lookups' value error over 2 spacings, the texture unit's position rounding on
     the gradient's own interpolant (4u * n * its largest jump) and its float32 storage.
-    Sample i's colour then moves by at most a_i T_i (kd + ks n) dN.L, and the weights a_i T_i
-    of a ray add up to its opacity, at most 1."""
+    Sample i's colour then moves by at most a_i T_i sum I (kd + ks n) dN.L, and the weights
+    a_i T_i of a ray add up to its opacity, at most 1."""
     ka, kd, ks, shininess = plan.scene.phong
+    intensity = sum(light.intensity for light in plan.scene.lights)
     v = plan.scene.volume
     vals = v.values()
     jump = max(float(np.abs(np.diff(vals, axis=a)).max()) for a in range(3))
@@ -78,7 +80,7 @@ def lit_tolerance(plan, unlit, g_floor):
     dg = math.sqrt(3) * (value_err / v.min_spacing + 4 * U32 * float(v.dims.max()) * g_jump
                          + 16 * U32 * float(np.abs(g).max()))
     dndl = 2 * dg / g_floor + 16 * U32
-    return (1 + ks) * unlit + (kd + ks * shininess) * dndl
+    return (ka + (kd + ks) * intensity) * unlit + intensity * (kd + ks * shininess) * dndl
 
 
 VARIANTS = [("raycast", {"step": 0.7, "ert_transmittance": 0.0}), ("slice3d", {"step": 0.7}),
@@ -196,6 +198,66 @@ def test_zero_gradient_leaves_samples_unlit(renderer, technique, opts):
     np.testing.assert_array_equal(lit, unlit)
     np.testing.assert_allclose(reference.exact(scene, cache=False),
                                reference.exact(scene.replace(shading=False), cache=False), rtol=0, atol=1e-14)
+
+
+# -- lights ----------------------------------------------------------------------------------
+
+LIGHTS = (dvr_gl.Light((1.0, 1.0, 0.5)), dvr_gl.Light((-0.3, 0.2, 1.0), space="view", intensity=0.6))
+
+
+@pytest.mark.parametrize("technique,opts", VARIANTS, ids=lambda v: str(v))
+@pytest.mark.parametrize("camera", ["perspective", "ortho", "eye_inside"])
+def test_gl_matches_reference_with_lights(renderer, technique, opts, camera):
+    """A world light and a dimmer view-space light, GL against the reference."""
+    scene = dvr_gl.Scene(RAMP, TF, cameras(RAMP)[camera], width=W, height=H, shading=True, lights=LIGHTS)
+    gl = renderer.render(scene, technique=technique, **opts)
+    ref = reference.render(scene, technique=technique, **opts)
+    plan = get_technique(technique).make_plan(scene, **opts)
+    assert plan.defines.get("LIGHTS") == 1
+    headlight = renderer.render(scene.replace(lights=dvr_gl.Light()), technique=technique, **opts)
+    assert metrics.max_abs_error(gl, headlight) > 0.05, "the lights must change the picture"
+    unlit_bound = derived_tolerance(plan) if technique == "raycast" else slice_tolerance(plan)
+    assert metrics.max_abs_error(gl, ref) <= lit_tolerance(plan, unlit_bound, gradient_floor(RAMP))
+
+
+def relit_by(unlit, scene, direction, intensity):
+    """The planar x-ramp's unlit image lit by one directional light towards ``direction``
+    (world, unit): |N.L| = |L_x| everywhere, H per pixel from L and the pixel's ray."""
+    ka, kd, ks, shininess = scene.phong
+    _, dirs = scene.camera.rays(scene.width, scene.height)
+    h = direction - dirs
+    ndh = np.abs(h[..., 0]) / np.linalg.norm(h, axis=-1)
+    out = np.array(unlit, np.float64, copy=True)
+    out[..., :3] = (unlit[..., :3] * (ka + kd * intensity * abs(direction[0]))
+                    + (ks * intensity * ndh ** shininess)[..., None] * unlit[..., 3:4])
+    return out
+
+
+@pytest.mark.parametrize("camera", ["oblique", "opposite", "eye_inside"])
+def test_a_world_light_on_a_ramp_is_the_unlit_image_relit(renderer, camera):
+    """Closed form for a directional light: exact to 1e-11, GL to float32 rounding."""
+    volume = planar_ramp()
+    direction = np.array([0.6, 0.48, 0.64])
+    light = dvr_gl.Light(direction, intensity=0.8)
+    scene = dvr_gl.Scene(volume, RAMP_TF, ramp_cameras(volume)[camera], width=W, height=H, shading=True,
+                         lights=light)
+    unlit = reference.exact(scene.replace(shading=False), cache=False)
+    np.testing.assert_allclose(reference.exact(scene, cache=False), relit_by(unlit, scene, direction, 0.8),
+                               rtol=0, atol=1e-11)
+    opts = {"step": 0.3, "ert_transmittance": 0.0}
+    gl = renderer.render(scene, **opts)
+    gl_unlit = renderer.render(scene.replace(shading=False), **opts)
+    segments = get_technique("raycast").make_plan(scene, **opts).max_segments
+    assert metrics.max_abs_error(gl, relit_by(gl_unlit, scene, direction, 0.8)) <= 8 * U32 * 2 * segments
+
+
+def test_a_view_light_along_the_view_is_the_headlight_in_orthographic_views(renderer):
+    """View-space (0, 0, 1) points back along every orthographic ray: the headlight."""
+    scene = dvr_gl.Scene(RAMP, TF, cameras(RAMP)["ortho"], width=W, height=H, shading=True)
+    view = scene.replace(lights=dvr_gl.Light((0, 0, 1), space="view"))
+    assert view.digest() != scene.digest()
+    assert metrics.max_abs_error(renderer.render(view), renderer.render(scene)) <= 1e-5
+    np.testing.assert_allclose(reference.render(view), reference.render(scene), rtol=0, atol=1e-12)
 
 
 # -- accuracy against exact ------------------------------------------------------------------

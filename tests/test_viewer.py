@@ -389,6 +389,20 @@ def test_mode_switching_and_iso(open_viewer, renderer, tmp_path):
     assert v.mode == "isosurface" and "raycast cannot render mip, minip, average lit" in v.messages[-1]
 
 
+def test_lit_start_with_lights_and_gradient_texture(open_viewer, renderer, tmp_path):
+    """--shading, --light and --gradients reach the viewer's scene; the frame is the
+    headless one; l switches the light off and on."""
+    v = head_viewer(open_viewer, "--screenshot", str(tmp_path / "l.png"), "--shading", "--light", "world:1,1,0",
+                    "--light", "view:0,0,1:0.5", "--gradients", "texture")
+    scene, name, step, options = v.render_arguments()
+    assert scene.shading and len(scene.lights) == 2 and options.get("gradients") == "texture"
+    v.refine()
+    press(v, "s")
+    assert_matches_headless(v, renderer, png(tmp_path / "l.png"))
+    press(v, "l")
+    assert not v.render_arguments()[0].shading
+
+
 def test_slice2d_and_modes_it_cannot_render(open_viewer):
     if "slice2d" not in technique_names():
         pytest.skip("slice2d has not landed")

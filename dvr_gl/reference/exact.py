@@ -61,7 +61,7 @@ import numpy as np
 
 from ..scene import Scene
 from .common import ray_box
-from .shading import gradient, gradient_epsilon, phong_terms, shade_blinn_phong
+from .shading import gradient, gradient_epsilon, phong_terms, scene_lights, shade_blinn_phong
 
 __all__ = ["exact", "VERSION"]
 
@@ -462,9 +462,9 @@ class _Exact(_Classified):
         self.valid = None if vol.cell_valid is None else vol.cell_valid.ravel()
         super().__init__(scene.tf)
         if scene.shading and scene.mode == "composite":
-            epsilon = gradient_epsilon(vol)
+            epsilon, lights = gradient_epsilon(vol), scene_lights(scene)
             self.lighting = lambda points, dirs: phong_terms(gradient(vol, self.values, points), dirs,
-                                                              scene.phong, epsilon)
+                                                              scene.phong, epsilon, lights)
 
     # -- traversal ------------------------------------------------------------
     def pieces(self, o, d, tcur, t1, M):
@@ -668,7 +668,7 @@ class _Exact(_Classified):
     def shade(self, points, dirs):
         c = np.broadcast_to(self.tf.color(self.scene.iso_value), points.shape)
         g = gradient(self.vol, self.values, points)
-        return shade_blinn_phong(c, g, dirs, self.scene.phong, gradient_epsilon(self.vol))
+        return shade_blinn_phong(c, g, dirs, self.scene.phong, gradient_epsilon(self.vol), scene_lights(self.scene))
 
 
 class _MeshExact(_Classified):
@@ -769,7 +769,8 @@ class _MeshExact(_Classified):
         s = self.mesh.scalars[self.mesh.tets[cells]]
         g = np.linalg.solve(p[:, 1:] - p[:, :1], (s[:, 1:] - s[:, :1])[..., None])[..., 0]
         lo, hi = self.mesh.data_range
-        return shade_blinn_phong(c, g, dirs, self.scene.phong, 1e-6 * (hi - lo) / self.mesh.cell_size)
+        return shade_blinn_phong(c, g, dirs, self.scene.phong, 1e-6 * (hi - lo) / self.mesh.cell_size,
+                                 scene_lights(self.scene))
 
 
 def _classify(tf, s):

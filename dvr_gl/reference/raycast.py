@@ -11,7 +11,7 @@ import numpy as np
 
 from .common import (box_rays, cell_is_valid, classifier, composite_front_to_back, correct_opacity, trilinear,
                      world_to_index)
-from .shading import gradient, gradient_epsilon, shade_blinn_phong, shade_segment
+from .shading import gradient, gradient_epsilon, scene_lights, shade_blinn_phong, shade_segment
 
 ISO_BISECTION_STEPS = 16  # as ISO_BISECTION_STEPS in shaders/common/isosurface.glsl
 
@@ -69,6 +69,7 @@ def render_plan(plan, lut_exact=False):
     mode = scene.mode
     lit = scene.shading and mode == "composite"
     epsilon = gradient_epsilon(volume)
+    lights = scene_lights(scene)
 
     def gradient_at(t, rows):
         return gradient(volume, values, o[rows] + t[:, None] * d[rows] + lo)
@@ -111,7 +112,7 @@ def render_plan(plan, lut_exact=False):
             if lit:
                 on = segment[:, 3] > 0
                 segment[on] = shade_segment(segment[on], gradient_at(tm[on], rows[on]), d[rows[on]],
-                                            scene.phong, epsilon)
+                                            scene.phong, epsilon, lights)
             s_front[rows] = s_back
             have_front[rows] = True
             transmittance = 1 - alpha_acc[rows]  # the over operator on an associated segment
@@ -130,7 +131,7 @@ def render_plan(plan, lut_exact=False):
                 on = rgba[:, 3] > 0
                 rgba = rgba.copy()
                 rgba[on, :3] = shade_blinn_phong(rgba[on, :3], gradient_at(tm[on], rows[on]), d[rows[on]],
-                                                 scene.phong, epsilon)
+                                                 scene.phong, epsilon, lights)
             color[rows], alpha_acc[rows] = composite_front_to_back(color[rows], alpha_acc[rows], rgba[:, :3], alpha)
             stop = alpha_acc[rows] >= 1
             if plan.ert_transmittance > 0:
@@ -179,7 +180,7 @@ def render_plan(plan, lut_exact=False):
             p = o[ok] + t_hit[ok, None] * d[ok] + lo
             rgb = np.broadcast_to(classify(np.array([scene.iso_value]))[0, :3], (ok.sum(), 3))
             g = gradient(volume, values, p)
-            result[ok, :3] = shade_blinn_phong(rgb, g, d[ok], scene.phong, epsilon)
+            result[ok, :3] = shade_blinn_phong(rgb, g, d[ok], scene.phong, epsilon, lights)
             result[ok, 3] = 1.0
     out[hit] = result
     return out.reshape(H, W, 4)

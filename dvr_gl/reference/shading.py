@@ -38,28 +38,60 @@ def sample_gradients(volume, values):
     return g
 
 
-def phong_terms(grad, ray_dir, phong, epsilon):
-    """The headlight's diffuse factor and specular term (two-sided, L = V = H = -ray_dir);
-    (1, 0) where |g| <= epsilon, which leaves a sample's colour as it is."""
+def scene_lights(scene):
+    """The scene's lights as (unit world direction towards the light, or None for the
+    headlight; intensity) pairs, or None for the contract's default headlight (whose
+    simpler formula both twins keep)."""
+    if scene.headlight_only:
+        return None
+    return [(light.world_direction(scene.camera), light.intensity) for light in scene.lights]
+
+
+def phong_terms(grad, ray_dir, phong, epsilon, lights=None):
+    """The lights' diffuse factor and specular term at samples with gradients ``grad``
+    seen along ``ray_dir``; (1, 0) where |g| <= epsilon, which leaves a sample's colour
+    as it is (GLSL ``phongTerms``).
+
+    Default (``lights`` None): the headlight, two-sided, L = V = H = -ray_dir:
+    ``ka + kd |N.L|`` and ``ks |N.L|^n``. With ``lights`` (see ``scene_lights``): the
+    contract's two-sided formula for each light, ``kd I |N.L|`` and ``ks I |N.H|^n`` with H
+    the unit half vector of L and V (none where L = -V); a headlight has L = V, which is
+    the default's formula. Being symmetric in N, it is continuous in the gradient."""
     ka, kd, ks, shininess = phong
+    grad = np.asarray(grad, np.float64)
+    ray_dir = np.asarray(ray_dir, np.float64)
     length = np.linalg.norm(grad, axis=-1)
     lit = length > epsilon
-    ndotl = np.abs(np.sum(grad * np.asarray(ray_dir), axis=-1)) / np.where(lit, length, 1.0)
-    diffuse = np.where(lit, ka + kd * ndotl, 1.0)
-    specular = np.where(lit, ks * ndotl ** shininess, 0.0)
-    return diffuse, specular
+    safe = np.where(lit, length, 1.0)
+    if lights is None:
+        ndotl = np.abs(np.sum(grad * ray_dir, axis=-1)) / safe
+        diffuse = ka + kd * ndotl
+        specular = ks * ndotl ** shininess
+    else:
+        v = -np.broadcast_to(ray_dir, grad.shape)
+        n = grad / safe[..., None]          # the sign of N does not matter under |.|
+        diffuse = np.full(length.shape, float(ka))
+        specular = np.zeros(length.shape)
+        for direction, intensity in lights:
+            l = v if direction is None else np.broadcast_to(direction, grad.shape)
+            h = l + v
+            hl = np.linalg.norm(h, axis=-1)
+            ndh = np.abs(np.sum(n * h, axis=-1)) / np.where(hl > 0, hl, 1.0)
+            diffuse = diffuse + kd * intensity * np.abs(np.sum(n * l, axis=-1))
+            specular = specular + np.where(hl > 0, ks * intensity * ndh ** shininess, 0.0)
+    return np.where(lit, diffuse, 1.0), np.where(lit, specular, 0.0)
 
 
-def shade_blinn_phong(color, grad, ray_dir, phong, epsilon):
+def shade_blinn_phong(color, grad, ray_dir, phong, epsilon, lights=None):
     """A straight colour lit. color, grad, ray_dir: (..., 3)."""
-    diffuse, specular = phong_terms(grad, ray_dir, phong, epsilon)
+    diffuse, specular = phong_terms(grad, ray_dir, phong, epsilon, lights)
     return color * diffuse[..., None] + specular[..., None]
 
 
-def shade_segment(segment, grad, ray_dir, phong, epsilon):
+def shade_segment(segment, grad, ray_dir, phong, epsilon, lights=None):
     """Premultiplied segments (..., 4), (c * alpha, alpha), lit: the lit colour associated
     with alpha (GLSL ``shadeSegment``)."""
-    diffuse, specular = phong_terms(grad, ray_dir, phong, epsilon)
+    diffuse, specular = phong_terms(grad, ray_dir, phong, epsilon, lights)
     out = np.array(segment, np.float64, copy=True)
     out[..., :3] = segment[..., :3] * diffuse[..., None] + (specular * segment[..., 3])[..., None]
     return out
@@ -84,9 +116,10 @@ def segment_light(scene, values, origins, dirs):
     volume = scene.volume
     lo, _ = volume.bounds
     epsilon = gradient_epsilon(volume)
+    lights = scene_lights(scene)
 
     def light(segments, t):
         g = gradient(volume, values, origins + np.asarray(t)[:, None] * dirs + lo)
-        out = shade_segment(segments, g, dirs, scene.phong, epsilon)
+        out = shade_segment(segments, g, dirs, scene.phong, epsilon, lights)
         return np.where(segments[:, 3:4] > 0, out, segments)
     return light

@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from ..scene import Scene
+from ..scene import MAX_LIGHTS, Scene
 
 TARGETS = {"rgba32f": "f4", "rgba16f": "f2", "rgba8": "f1"}
 
@@ -114,6 +114,8 @@ def shading_defines(scene, gradients):
         defines["SHADING"] = 1
     if scene.shaded and gradients == "texture":
         defines["GRADIENT_TEXTURE"] = 1
+    if scene.shaded and not scene.headlight_only:
+        defines["LIGHTS"] = 1
     return defines
 
 
@@ -146,6 +148,14 @@ def add_optional_inputs(renderer, plan, textures, uniforms):
         uniforms["u_gradient_epsilon"] = gradient_epsilon(scene.volume)
         if plan.defines.get("GRADIENT_TEXTURE"):
             textures["t_gradient"] = gradient_texture(renderer, scene.volume)
+        if plan.defines.get("LIGHTS"):
+            lights = np.zeros((MAX_LIGHTS, 4), np.float32)
+            for row, light in zip(lights, scene.lights):
+                direction = light.world_direction(scene.camera)
+                row[:3] = 0.0 if direction is None else direction
+                row[3] = light.intensity
+            uniforms["u_light_count"] = len(scene.lights)
+            uniforms["u_lights"] = [tuple(row) for row in lights.tolist()]
 
 
 def bind(prog, textures, uniforms):

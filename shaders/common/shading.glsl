@@ -37,6 +37,11 @@ vec3 gradient(vec3 p_world) {
 }
 #endif
 
+#ifndef LIGHTS
+#define LIGHTS 0
+#endif
+
+#if !LIGHTS
 // The headlight's (diffuse factor, specular term) for a sample with gradient grad, seen
 // along ray_dir: two-sided, L = V = H = -ray_dir. (1, 0) where the gradient vanishes, so
 // that sample keeps its colour.
@@ -46,6 +51,31 @@ vec2 phongTerms(vec3 grad, vec3 ray_dir) {
     float ndotl = abs(dot(grad / len, ray_dir));
     return vec2(u_phong.x + u_phong.y * ndotl, u_phong.z * pow(ndotl, u_phong.w));
 }
+#else
+#define MAX_LIGHTS 4
+uniform int u_light_count;
+uniform vec4 u_lights[MAX_LIGHTS];  // xyz: unit world direction towards the light (0: the
+                                    // headlight, L = V); w: intensity
+
+// The same for the scene's lights, with the contract's two-sided formula per light:
+// kd I |N.L| and ks I |N.H|^n, H the unit half vector of L and V (none where L = -V).
+vec2 phongTerms(vec3 grad, vec3 ray_dir) {
+    float len = length(grad);
+    if (len <= u_gradient_epsilon) return vec2(1.0, 0.0);
+    vec3 v = -ray_dir;
+    vec3 n = grad / len;  // its sign does not matter under abs
+    vec2 terms = vec2(u_phong.x, 0.0);
+    for (int i = 0; i < u_light_count; ++i) {
+        vec3 l = u_lights[i].xyz;
+        if (l == vec3(0.0)) l = v;
+        vec3 h = l + v;
+        float hl = length(h);
+        float specular = hl > 0.0 ? u_phong.z * pow(abs(dot(n, h)) / hl, u_phong.w) : 0.0;
+        terms += u_lights[i].w * vec2(u_phong.y * abs(dot(n, l)), specular);
+    }
+    return terms;
+}
+#endif
 
 // A straight colour lit.
 vec3 shadeBlinnPhong(vec3 color, vec3 grad, vec3 ray_dir) {
