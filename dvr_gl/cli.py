@@ -151,6 +151,10 @@ def add_render_options(r):
                    help="slice3d: slice polygons made on the CPU or in the vertex shader (default: cpu)")
     r.add_argument("--shells", action="store_true",
                    help="slice3d: slice along spherical shells around the eye instead of planes")
+    r.add_argument("--optical-model", choices=("emission_absorption", "absorption", "emission"),
+                   help="composite mode: emission and absorption (default), absorption only (C = 0, "
+                        "A = 1 - T), or emission only (C = integral of c tau, A = 0; written over black "
+                        "unless --background)")
     r.add_argument("--shading", action="store_true",
                    help="light the samples with a Blinn-Phong headlight (composite mode; raycast, slice3d, slice2d)")
     r.add_argument("--light", type=_light, action="append", metavar="SPACE:X,Y,Z[:I]",
@@ -163,7 +167,7 @@ def add_render_options(r):
     r.add_argument("--target", choices=("rgba32f", "rgba16f", "rgba8"),
                    help="render target format (default: rgba32f)")
     r.add_argument("--mode", choices=MODES,
-                   help="optical model (default: composite, or isosurface when --iso is given)")
+                   help="rendering mode (default: composite, or isosurface when --iso is given)")
     r.add_argument("--iso", type=_number, metavar="V", help="iso-value for --mode isosurface (data units)")
     r.add_argument("--size", type=_size, default=(512, 512), metavar="WxH",
                    help="image size in pixels (default: 512x512)")
@@ -504,6 +508,13 @@ def cmd_render(args, out=None):
         raise UsageError("--shading", f"lights composite samples (isosurfaces always are), not --mode {mode}")
     if args.shading and args.technique not in ("raycast", "slice2d", "slice3d"):
         raise UsageError("--shading", f"applies to --technique raycast, slice3d or slice2d, not {args.technique}")
+    if args.optical_model not in (None, "emission_absorption"):
+        if args.technique not in ("raycast", "slice2d", "slice3d"):
+            raise UsageError("--optical-model", f"{args.optical_model} applies to --technique raycast, slice3d or "
+                                                f"slice2d, not {args.technique}")
+        if args.preintegrate:
+            raise UsageError("--optical-model", f"{args.optical_model} is sampled at segment midpoints; "
+                                                "leave out --preintegrate")
     if args.light and not (args.shading or mode == "isosurface"):
         raise UsageError("--light", "is only used with --shading (or --mode isosurface)")
     if args.light and len(args.light) > 4:
@@ -522,8 +533,16 @@ def cmd_render(args, out=None):
     camera = default_camera(volume, azimuth=args.azimuth, elevation=args.elevation, zoom=args.zoom,
                             fov=args.fov, ortho=args.ortho)
     width, height = args.size
-    scene = Scene(volume, tf, camera, width=width, height=height, mode=mode, iso_value=args.iso,
-                  shading=args.shading, **({"lights": tuple(args.light)} if args.light else {}))
+    optical = {"optical_model": args.optical_model} if args.optical_model else {}
+    try:
+        scene = Scene(volume, tf, camera, width=width, height=height, mode=mode, iso_value=args.iso,
+                      shading=args.shading, **({"lights": tuple(args.light)} if args.light else {}), **optical)
+    except ValueError as e:
+        if not optical:
+            raise
+        raise UsageError("--optical-model", str(e)) from None
+    if args.optical_model == "emission" and args.background is None:
+        args.background = (0.0, 0.0, 0.0)    # nothing absorbs: A = 0, the light shows over a background
     t_load = time.perf_counter() - t0
 
     import dvr_gl

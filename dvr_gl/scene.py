@@ -21,7 +21,10 @@ import numpy as np
 
 SUPPORTED_DTYPES = (np.uint8, np.uint16, np.int16, np.float32, np.float64)
 MODES = ("composite", "mip", "minip", "average", "isosurface")
-SHADED_MODES = ("composite", "isosurface")  # modes a lit sample has a meaning in (isosurface always is)
+SHADED_MODES = ("composite", "isosurface")
+# composite mode's optical models (Max 1995): emission and absorption (the contract's
+# default), absorption only (C = 0, A = 1 - T), emission only (C = integral c tau dt, A = 0)
+OPTICAL_MODELS = ("emission_absorption", "absorption", "emission")  # modes a lit sample has a meaning in (isosurface always is)
 MAX_IMAGE_SIDE = 65536  # larger than one GL target: rendered in tiles
 
 
@@ -483,7 +486,8 @@ class Scene:
     a camera, an image size and a mode."""
 
     def __init__(self, volume, tf, camera, width=512, height=512, mode="composite",
-                 iso_value=None, shading=False, phong=(0.3, 0.7, 0.2, 32.0), lights=(HEADLIGHT,)):
+                 iso_value=None, shading=False, phong=(0.3, 0.7, 0.2, 32.0), lights=(HEADLIGHT,),
+                 optical_model="emission_absorption"):
         if not isinstance(volume, (Volume, TetMesh)):
             raise TypeError(f"volume must be a dvr_gl.Volume or dvr_gl.TetMesh, got {type(volume).__name__}")
         for name, value, cls in (("tf", tf, TransferFunction), ("camera", camera, Camera)):
@@ -513,6 +517,20 @@ class Scene:
             raise TypeError(f"phong must be (ka, kd, ks, shininess), got {phong!r}") from None
         if len(phong) != 4 or not all(math.isfinite(v) and v >= 0 for v in phong):
             raise ValueError(f"phong must be four finite non-negative numbers (ka, kd, ks, shininess), got {phong!r}")
+        if optical_model not in OPTICAL_MODELS:
+            raise ValueError(f"optical_model must be one of {', '.join(OPTICAL_MODELS)}, got {optical_model!r}")
+        if optical_model != "emission_absorption":
+            if mode != "composite":
+                raise ValueError(f"optical_model applies to mode 'composite', got optical_model={optical_model!r} "
+                                 f"with mode={mode!r}")
+            if optical_model == "absorption" and shading:
+                raise ValueError("optical_model='absorption' emits nothing, so there is nothing to light: "
+                                 "got shading=True")
+            if optical_model == "emission":
+                opaque = [s for s, a in tf.opacity_points if a >= 1]
+                if opaque:
+                    raise ValueError(f"optical_model='emission' needs opacities below 1 (tau is infinite where "
+                                     f"alpha = 1), got alpha = 1 at s = {opaque[0]:g}")
         if isinstance(lights, Light):
             lights = (lights,)
         try:
@@ -525,6 +543,7 @@ class Scene:
         self.tf = tf
         self.camera = camera
         self.lights = lights
+        self.optical_model = optical_model
         self.width = int(width)
         self.height = int(height)
         self.mode = mode
@@ -566,7 +585,8 @@ class Scene:
         """A copy with some fields changed (validated again)."""
         args = dict(volume=self.volume, tf=self.tf, camera=self.camera, width=self.width,
                     height=self.height, mode=self.mode, iso_value=self.iso_value,
-                    shading=self.shading, phong=self.phong, lights=self.lights)
+                    shading=self.shading, phong=self.phong, lights=self.lights,
+                    optical_model=self.optical_model)
         args.update(changes)
         return Scene(**args)
 
@@ -579,6 +599,8 @@ class Scene:
             h.update(repr(part).encode())
         if not self.headlight_only:   # the default light leaves earlier digests (and caches) as they were
             h.update(repr(tuple(light.key() for light in self.lights)).encode())
+        if self.optical_model != "emission_absorption":
+            h.update(self.optical_model.encode())
         return h.hexdigest()
 
     def __repr__(self):

@@ -56,7 +56,7 @@ import numpy as np
 
 from . import io as dvr_io
 from .gl.context import current, idle_framebuffer
-from .scene import MODES, Camera, Scene, default_camera
+from .scene import MODES, OPTICAL_MODELS, Camera, Scene, default_camera
 from .viewer_overlay import OverlayDrawer, TFEditor
 
 PROG = "dvr-gl view"
@@ -93,6 +93,7 @@ dvr-gl view: keys and mouse
   m / M                next / previous mode (composite, mip, minip, average, isosurface)
   , / .                iso value down / up (isosurface mode; shift: 5x)
   l                    shading on / off
+  x                    optical model: emission-absorption, absorption only, emission only
   p                    pre-integration on / off (techniques that offer it)
   c                    cell order mpvo / centroid (tetra, for meshes)
   - / =                coarser / finer step (slice2d: fewer / more interpolated slices;
@@ -459,6 +460,7 @@ class Settings:
     visible: bool = True
     options: dict = field(default_factory=dict)   # technique options (preintegrate, interpolate, ...)
     shading: bool = False                # lit composite (key l switches it)
+    optical_model: str = "emission_absorption"   # composite's optical model (key x cycles it)
     lights: tuple | None = None          # dvr_gl.Light objects; None: the headlight
 
 
@@ -502,6 +504,7 @@ class Viewer:
         self.mode = settings.mode
         self.iso = settings.iso if settings.iso is not None else self._default_iso()
         self.shading = settings.shading
+        self.optical_model = settings.optical_model
         self.lights = settings.lights
         self.step = settings.step          # None: the technique's default
         self.options = dict(settings.options)  # technique options: command line, then keys
@@ -697,7 +700,8 @@ class Viewer:
     def _scene(self, width, height, tf=None):
         return Scene(self.volume, tf or self.tf, self.orbit.camera(), width=width, height=height,
                      mode=self.mode, iso_value=self.iso if self.mode == "isosurface" else None,
-                     shading=self.shading, **({"lights": self.lights} if self.lights else {}))
+                     shading=self.shading, **({"lights": self.lights} if self.lights else {}),
+                     optical_model=self.optical_model)
 
     def _options(self, name=None):
         info = self.techniques[name or self.technique]
@@ -731,10 +735,10 @@ class Viewer:
 
     def _state(self):
         """The rendering choices (not the camera or the transfer function)."""
-        return (self.technique, self.mode, self.iso, self.shading, dict(self.options), self.step)
+        return (self.technique, self.mode, self.iso, self.shading, self.optical_model, dict(self.options), self.step)
 
     def _restore(self, state, changed=True):
-        (self.technique, self.mode, self.iso, self.shading, options, self.step) = state
+        (self.technique, self.mode, self.iso, self.shading, self.optical_model, options, self.step) = state
         self.options = dict(options)
         if changed:
             self._changed()
@@ -913,6 +917,11 @@ class Viewer:
             self.nudge_iso((1 if key == KEY_PERIOD else -1) * (5 if shift else 1))
         elif char == "l":
             self._try(lambda: setattr(self, "shading", not self.shading), "switch shading")
+        elif char == "x":
+            models = OPTICAL_MODELS
+            model = models[(models.index(self.optical_model) + 1) % len(models)]
+            if self._try(lambda: setattr(self, "optical_model", model), f"use optical model {model}"):
+                self.say(f"optical model {model}")
         elif char == "p":
             self.toggle_option("preintegrate")
         elif char == "c":
@@ -1466,7 +1475,8 @@ def settings_from_args(args) -> Settings:
                     ortho=args.ortho, background=args.background, screenshot=screenshot,
                     tf_out=args.tf_out, editor=not args.hide_editor, vsync=args.frames is None,
                     options=options, shading=bool(getattr(args, "shading", False)),
-                    lights=tuple(args.light) if getattr(args, "light", None) else None)
+                    lights=tuple(args.light) if getattr(args, "light", None) else None,
+                    optical_model=getattr(args, "optical_model", None) or "emission_absorption")
 
 
 def open_viewer(argv) -> Viewer:

@@ -123,6 +123,10 @@ BAD = [
     (["--shading", "--light", "world:0,0,0"], "argument --light", "zero vector"),
     (["--shading", "--light", "view:1,1,1:-2"], "argument --light", "non-negative"),
     (["--shading"] + ["--light", "headlight"] * 5, "--light", "at most 4 lights"),
+    (["--optical-model", "glow"], "argument --optical-model", "'glow'"),
+    (["--optical-model", "absorption", "--shading"], "--optical-model", "nothing to light"),
+    (["--optical-model", "emission", "--technique", "splat"], "--optical-model", "not splat"),
+    (["--optical-model", "emission", "--preintegrate"], "--optical-model", "leave out --preintegrate"),
 ]
 
 
@@ -655,3 +659,19 @@ def test_shading_bench_quick_run(tmp_path, capsys):
     assert float(rows["raycast lit"]["rmse"]) < 1e-2
     convergence = json.load(open(tmp_path / "s.json"))["info"]["convergence"]
     assert np.mean(convergence["raycast_orders"]) > 1.7
+
+
+def test_render_optical_models(renderer, tiny, capsys):
+    """--optical-model absorption writes (0, A); emission writes its light over black
+    unless --background says otherwise."""
+    d, _ = tiny
+    vol = load_volume(d / "tiny.npy")
+    scene = dvr_gl.Scene(vol, auto_preset(vol), dvr_gl.default_camera(vol), 32, 32)
+    for model, background in (("absorption", None), ("emission", (0.0, 0.0, 0.0))):
+        out = d / f"{model}.png"
+        code, stdout, err = _run(["render", d / "tiny.npy", "--size", "32x32", "--optical-model", model,
+                                  "--out", out], capsys)
+        assert code == 0, err
+        image = renderer.render(scene.replace(optical_model=model))
+        assert np.array_equal(_png(out)[1], to_png_array(image, background))
+        assert ("RGB over background" in stdout) == (background is not None)

@@ -401,6 +401,16 @@ def test_lit_start_with_lights_and_gradient_texture(open_viewer, renderer, tmp_p
     assert_matches_headless(v, renderer, png(tmp_path / "l.png"))
     press(v, "l")
     assert not v.render_arguments()[0].shading
+    # x cycles the optical model; absorption only cannot be lit, so with l on it is skipped
+    press(v, "x")
+    assert v.render_arguments()[0].optical_model == "absorption" and v.messages[-1] == "optical model absorption"
+    v.refine()
+    assert v.render_image()[..., :3].max() == 0 and v.render_image()[..., 3].max() > 0.1
+    press(v, "l")
+    assert "cannot switch shading" in v.messages[-1] and "nothing to light" in v.messages[-1]
+    press(v, "x")
+    press(v, "x")
+    assert v.optical_model == "emission_absorption"
 
 
 def test_slice2d_and_modes_it_cannot_render(open_viewer):

@@ -105,14 +105,38 @@ def classifier(plan, lut_exact=False):
     return plan.lut.lookup, plan.lut.lookup_transparency
 
 
-def classified_segment(classify, transparency, s, length_over_unit):
-    """Premultiplied RGBA (..., 4) of segments with field value ``s``, opacity corrected
-    for their length (GLSL ``classifiedSegment``)."""
-    rgba = classify(s)
-    alpha = correct_opacity(rgba[..., 3], length_over_unit, transparency(s))
-    out = np.concatenate([rgba[..., :3] * alpha[..., None], alpha[..., None]], axis=-1)
-    out[rgba[..., 3] <= 0] = 0
+def segment_of(rgba, transparency, length_over_unit, model="emission_absorption"):
+    """Premultiplied RGBA (..., 4) of segments ``length_over_unit`` unit distances long of
+    samples with straight colour and unit-distance opacity ``rgba`` (and the precise
+    ``transparency`` 1 - alpha) under the optical ``model`` (GLSL ``segmentOf``):
+    emission-absorption (c alpha, alpha) with alpha corrected for the length; absorption
+    only (0, alpha); emission only (c tau L, 0)."""
+    rgba = np.asarray(rgba, np.float64)
+    a = rgba[..., 3]
+    x = np.asarray(length_over_unit, np.float64)
+    if model == "emission":
+        with np.errstate(divide="ignore", invalid="ignore"):
+            log_t = np.where(a <= 0.5, np.log1p(-np.minimum(a, 0.5)),
+                             np.log(np.maximum(np.asarray(transparency, np.float64), 0)))
+        weight = -log_t * np.maximum(x, 0)
+        out = np.concatenate([rgba[..., :3] * weight[..., None], np.zeros(a.shape + (1,))], axis=-1)
+    else:
+        alpha = correct_opacity(a, x, transparency)
+        rgb = np.zeros(rgba[..., :3].shape) if model == "absorption" else rgba[..., :3] * alpha[..., None]
+        out = np.concatenate([rgb, alpha[..., None]], axis=-1)
+    out[a <= 0] = 0
     return out
+
+
+def classified_segment(classify, transparency, s, length_over_unit, model="emission_absorption", lit=None):
+    """Premultiplied RGBA (..., 4) of segments with field value ``s`` (GLSL
+    ``classifiedSegment``, and ``sampleSegment`` with ``lit``: a function lighting the
+    straight colours before they are associated)."""
+    rgba = classify(s)
+    if lit is not None:
+        rgba = np.array(rgba, np.float64, copy=True)
+        rgba[..., :3] = lit(rgba[..., :3])
+    return segment_of(rgba, transparency(s), length_over_unit, model)
 
 
 def composite_front_to_back(color_acc, alpha_acc, rgb, alpha):
@@ -159,15 +183,17 @@ def segment_colors(plan, sample, valid, a, b, lut_exact=False, light=None):
     """Premultiplied RGBA of the segments [a, b] of the rays: a midpoint sample with
     opacity corrected for the length, or the pre-integrated table. ``sample(t)`` and
     ``valid(t)`` (None without masking) evaluate the field and the masked-cell test at
-    ray distances ``t``; ``light(segments, t)`` (None when unlit, see
-    ``shading.segment_light``) lights them at their midpoints."""
+    ray distances ``t``; ``light`` (a ``shading.RayLighting`` of the same rays, None when
+    unlit) lights them at their midpoints."""
     tm = 0.5 * (a + b)
     if plan.preint is not None:
         out = plan.preint.segment(sample(a), sample(b), b - a)
+        if light is not None:
+            out = light.segments(out, tm)
     else:
-        out = classified_segment(*classifier(plan, lut_exact), sample(tm), (b - a) / plan.scene.tf.unit_distance)
-    if light is not None:
-        out = light(out, tm)
+        lit = None if light is None else (lambda rgb: light.colors(rgb, tm))
+        out = classified_segment(*classifier(plan, lut_exact), sample(tm), (b - a) / plan.scene.tf.unit_distance,
+                                 plan.scene.optical_model, lit)
     if valid is not None:
         out[~valid(tm)] = 0
     return out
@@ -181,14 +207,14 @@ def gap_pass(acc, gap, rays, plan, max_step, lut_exact=False):
     rows = np.nonzero(gap)[0]
     if rows.size == 0:
         return
-    from .shading import segment_light
+    from .shading import ray_lighting
     volume = plan.scene.volume
     values = volume.values(np.float64)
     lo, _ = volume.bounds
 
     def segment(sub, a, b):
         oo, dd = o[rows[sub]], d[rows[sub]]
-        light = segment_light(plan.scene, values, oo, dd)
+        light = ray_lighting(plan.scene, values, oo, dd)
 
         def sample(tt):
             return trilinear(values, (oo + tt[:, None] * dd) / volume.spacing)
@@ -198,8 +224,8 @@ def gap_pass(acc, gap, rays, plan, max_step, lut_exact=False):
         return segment_colors(plan, sample, valid if volume.has_nonfinite else None, a, b, lut_exact, light)
 
     src = chord_color(segment, t0[rows], t1[rows], max_step)
-    src[src[:, 3] <= 0] = 0
-    acc[rows] = blend_over(acc[rows], src, plan.target)
+    drawn = np.any(src != 0, axis=1)           # GL discards all-zero fragments
+    acc[rows[drawn]] = blend_over(acc[rows[drawn]], src[drawn], plan.target)
 
 
 def round_to_target(x, target):

@@ -205,9 +205,12 @@ class _Classified:
     # dirs; None leaves colours unlit
     lighting = None
 
-    def __init__(self, tf):
+    def __init__(self, tf, optical_model="emission_absorption"):
         self.tf = tf
         self.inv_u = 1.0 / tf.unit_distance
+        # emission only: nothing absorbs (T = 1 throughout); absorption only: no colour
+        self.emission = optical_model == "emission"
+        self.absorption = optical_model == "absorption"
         K = tf.knots
         self.K = K
         nk = len(K)
@@ -225,6 +228,8 @@ class _Classified:
             dK = np.diff(K)
             a1[1:nk] = np.diff(aK) / dK
             c1[1:nk] = np.diff(cK, axis=0) / dK[:, None]
+        if self.absorption:
+            c0, c1 = np.zeros_like(c0), np.zeros_like(c1)
         self.anchor, self.a0, self.a1 = anchor, a0, a1
         self.c0, self.c1 = c0, c1
         # Intervals where opacity is not identically zero, as a prefix count.
@@ -336,7 +341,8 @@ class _Classified:
         order = np.lexsort((pta, psub))
         psub, pod, pcol = psub[order], pod[order], pcol[order]
         prow = srow[psub]
-        wgt = np.exp(-_segmented_exclusive_sum(pod, prow))
+        # transmittance from the window's start to each part (1 where nothing absorbs)
+        wgt = np.ones(len(pod)) if self.emission else np.exp(-_segmented_exclusive_sum(pod, prow))
         OD = np.bincount(prow, pod, na)
         for ch in range(3):
             C[:, ch] = np.bincount(prow, wgt * pcol[:, ch], na)
@@ -345,7 +351,10 @@ class _Classified:
     def od_lower(self, sub, i, ta, tb):
         """A lower bound of the optical depth of parts [ta, tb] of sub-pieces i: the
         smallest opacity over the part's value range (ends and interior critical points;
-        opacity is linear in s on a sub-piece) times its length."""
+        opacity is linear in s on a sub-piece) times its length. Emission only: 0, since
+        nothing in front of a part absorbs."""
+        if self.emission:
+            return np.zeros(len(ta))
         c = sub["coef"][i]
         sa, sb = _peval(c, ta), _peval(c, tb)
         lo, hi = np.minimum(sa, sb), np.maximum(sa, sb)
@@ -399,7 +408,7 @@ class _Classified:
     def color_at(self, s, tau, geo, rows):
         """The (lit) colour of field values s at piece parameters tau; ``geo`` holds
         the pieces' geometry (None: unlit), ``rows`` picks the pieces."""
-        c = self.tf.color(s)
+        c = np.zeros((len(s), 3)) if self.absorption else self.tf.color(s)
         if geo is None or len(s) == 0:
             return c
         points = geo["base"][rows] + tau[:, None] * geo["hd"][rows]
@@ -421,6 +430,8 @@ class _Classified:
         Tk = np.exp(-hw[:, None] * (tau @ _SK.T))   # transmittance from the part's start
         tg = tau[:, _GI]
         Tg = np.exp(-hw[:, None] * (tg @ _SG.T))
+        if self.emission:
+            Tk, Tg = np.ones_like(Tk), np.ones_like(Tg)
         ODk = hw * (tau @ _WK)
         gk = tau * Tk
         gg = tg * Tg
@@ -443,7 +454,8 @@ class _Classified:
         err = np.maximum(np.abs(ODk - hw * (tg @ _WG)), np.abs(Ck - Cg).max(axis=1))
         # with c = 1 the colour integral is 1 - exp(-OD) exactly: a transmittance that
         # falls too fast for the nodes (both rules missing it) shows up here
-        err = np.maximum(err, np.abs(G0k + np.expm1(-ODk)))
+        if not self.emission:
+            err = np.maximum(err, np.abs(G0k + np.expm1(-ODk)))
         return ODk, Ck, err
 
 
@@ -460,7 +472,7 @@ class _Exact(_Classified):
         self.origin = vol.origin
         self.spacing = vol.spacing
         self.valid = None if vol.cell_valid is None else vol.cell_valid.ravel()
-        super().__init__(scene.tf)
+        super().__init__(scene.tf, scene.optical_model)
         if scene.shading and scene.mode == "composite":
             epsilon, lights = gradient_epsilon(vol), scene_lights(scene)
             self.lighting = lambda points, dirs: phong_terms(gradient(vol, self.values, points), dirs,
@@ -656,12 +668,15 @@ class _Exact(_Classified):
                 P["dir"] = d[r]
             OD, C, term = self.window(P, T, len(a))
             col[a] += T[:, None] * C
-            od[a] += OD
+            if not self.emission:          # emission only: nothing absorbs, T stays 1
+                od[a] += OD
             opaque[a] |= term
             return term | (od[a] > od_stop)
 
         self.march(o, d, t0, t1, _WINDOW["composite"], step)
         A = np.where(opaque, 1.0, -np.expm1(-od))
+        if self.emission:
+            A = np.zeros(n)
         return np.concatenate([col, A[:, None]], axis=1)
 
     # -- shading -----------------------------------------------------------------------
@@ -681,7 +696,7 @@ class _MeshExact(_Classified):
     local ray index in [0, n), ``t0``, ``t1``, ``s0``, ``s1``, ``tet``), and ``n``."""
 
     def __init__(self, scene):
-        super().__init__(scene.tf)
+        super().__init__(scene.tf, scene.optical_model)
         self.scene = scene
         self.mesh = scene.volume
 
@@ -716,10 +731,13 @@ class _MeshExact(_Classified):
                 T = np.exp(-od[a])
                 OD, C, term = self.window(self._pieces(seg, idx, rows), T, len(a))
                 col[a] += T[:, None] * C
-                od[a] += OD
+                if not self.emission:
+                    od[a] += OD
                 opaque[a] |= term
                 active[a] &= ~(term | (od[a] > od_stop))
         A = np.where(opaque, 1.0, -np.expm1(-od))
+        if self.emission:
+            A = np.zeros(n)
         return np.concatenate([col, A[:, None]], axis=1)
 
     def extreme(self, seg, n, sign):

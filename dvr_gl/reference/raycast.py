@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .common import (box_rays, cell_is_valid, classifier, composite_front_to_back, correct_opacity, trilinear,
+from .common import (box_rays, cell_is_valid, classified_segment, classifier, trilinear,
                      world_to_index)
 from .shading import gradient, gradient_epsilon, scene_lights, shade_blinn_phong, shade_segment
 
@@ -125,14 +125,14 @@ def render_plan(plan, lut_exact=False):
             continue
         s = sample(tm, rows)
         if mode == "composite":
-            rgba = classify(s)
-            alpha = correct_opacity(rgba[:, 3], length * inv_unit, transparency(s))
+            light = None
             if lit:
-                on = rgba[:, 3] > 0
-                rgba = rgba.copy()
-                rgba[on, :3] = shade_blinn_phong(rgba[on, :3], gradient_at(tm[on], rows[on]), d[rows[on]],
-                                                 scene.phong, epsilon, lights)
-            color[rows], alpha_acc[rows] = composite_front_to_back(color[rows], alpha_acc[rows], rgba[:, :3], alpha)
+                light = lambda rgb: shade_blinn_phong(rgb, gradient_at(tm, rows), d[rows],   # noqa: E731
+                                                      scene.phong, epsilon, lights)
+            piece = classified_segment(classify, transparency, s, length * inv_unit, scene.optical_model, light)
+            transmittance = 1 - alpha_acc[rows]
+            color[rows] += transmittance[:, None] * piece[:, :3]
+            alpha_acc[rows] += transmittance * piece[:, 3]
             stop = alpha_acc[rows] >= 1
             if plan.ert_transmittance > 0:
                 stop |= 1 - alpha_acc[rows] < plan.ert_transmittance

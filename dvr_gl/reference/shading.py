@@ -107,19 +107,35 @@ def gradient_epsilon(volume):
     return 1e-6 * scale / volume.min_spacing
 
 
-def segment_light(scene, values, origins, dirs):
-    """For a lit composite scene, ``light(segments, t)``: premultiplied segments of the
-    rays ``origins + t * dirs`` (box-relative, one per row) lit at ray distances ``t``;
-    None when the scene's samples are unlit."""
+class RayLighting:
+    """The lighting of a lit composite scene along some rays ``origins + t * dirs``
+    (box-relative, one per row): ``colors(rgb, t)`` lights straight colours of samples at
+    ray distances ``t`` (GLSL ``litColor``), ``segments(seg, t)`` lights premultiplied
+    (pre-integrated) segments there (GLSL ``shadeSegment``)."""
+
+    def __init__(self, scene, values, origins, dirs):
+        self.scene, self.values, self.origins, self.dirs = scene, values, origins, dirs
+        self.lo, _ = scene.volume.bounds
+        self.epsilon = gradient_epsilon(scene.volume)
+        self.lights = scene_lights(scene)
+
+    def terms(self, t):
+        g = gradient(self.scene.volume, self.values, self.origins + np.asarray(t)[:, None] * self.dirs + self.lo)
+        return phong_terms(g, self.dirs, self.scene.phong, self.epsilon, self.lights)
+
+    def colors(self, rgb, t):
+        diffuse, specular = self.terms(t)
+        return rgb * diffuse[:, None] + specular[:, None]
+
+    def segments(self, seg, t):
+        diffuse, specular = self.terms(t)
+        out = np.array(seg, np.float64, copy=True)
+        out[:, :3] = seg[:, :3] * diffuse[:, None] + (specular * seg[:, 3])[:, None]
+        return np.where(seg[:, 3:4] > 0, out, seg)
+
+
+def ray_lighting(scene, values, origins, dirs):
+    """A ``RayLighting`` for a lit composite scene, None when its samples are unlit."""
     if not (scene.shading and scene.mode == "composite"):
         return None
-    volume = scene.volume
-    lo, _ = volume.bounds
-    epsilon = gradient_epsilon(volume)
-    lights = scene_lights(scene)
-
-    def light(segments, t):
-        g = gradient(volume, values, origins + np.asarray(t)[:, None] * dirs + lo)
-        out = shade_segment(segments, g, dirs, scene.phong, epsilon, lights)
-        return np.where(segments[:, 3:4] > 0, out, segments)
-    return light
+    return RayLighting(scene, values, origins, dirs)

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from .common import blend_over, box_rays, cell_is_valid, gap_pass, classified_segment, classifier, trilinear, world_to_index
-from .shading import segment_light
+from .shading import ray_lighting
 
 
 def render_plan(plan, lut_exact=False):
@@ -60,18 +60,19 @@ def render_plan(plan, lut_exact=False):
 
         def sample_between(tt):
             return trilinear(values, (oo + tt[:, None] * dd) / volume.spacing)
-        light = segment_light(scene, values, oo, dd)
-        if light is None:
-            light = lambda segments, t: segments           # noqa: E731
+        lighting = ray_lighting(scene, values, oo, dd)
+        light = (lambda seg, t: seg) if lighting is None else lighting.segments   # noqa: E731
 
         if plan.preint is None:
             a = np.where(near_in, 0.5 * (t_near + tj), r0)
             b = np.where(far_in, 0.5 * (tj + t_far), r1)
             partial = ~(near_in & far_in)
             s = np.where(partial, sample_between(0.5 * (a + b)), s)
-            src = classified_segment(classify, transparency, s, (b - a) / scene.tf.unit_distance)
             # lit where the sample was taken: the slice point, or the partial slab's midpoint
-            src = light(src, np.where(partial, 0.5 * (a + b), tj))
+            t_sample = np.where(partial, 0.5 * (a + b), tj)
+            lit = None if lighting is None else (lambda rgb: lighting.colors(rgb, t_sample))
+            src = classified_segment(classify, transparency, s, (b - a) / scene.tf.unit_distance,
+                                     scene.optical_model, lit)
         else:
             t_far_all = np.where(here, slice_t(j_far), 0)
             s_back = np.where(far_in, sample(j_far, t_far_all)[rows], sample_between(r1))
@@ -79,8 +80,8 @@ def render_plan(plan, lut_exact=False):
             back = light(plan.preint.segment(s, s_back, np.maximum(t_back - tj, 0)), 0.5 * (tj + t_back))
             front = light(plan.preint.segment(sample_between(r0), s, np.maximum(tj - r0, 0)), 0.5 * (r0 + tj))
             src = np.where(near_in[:, None], back, blend_over(back, front))
-        src[src[:, 3] <= 0] = 0
-        acc[rows] = blend_over(acc[rows], src, plan.target)
+        drawn = np.any(src != 0, axis=1)       # GL discards all-zero fragments
+        acc[rows[drawn]] = blend_over(acc[rows[drawn]], src[drawn], plan.target)
 
     # the gap pass: rays that meet no slice inside the box get their whole chord
     gap = t1 > t0

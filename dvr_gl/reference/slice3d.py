@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from .common import blend_over, box_rays, cell_is_valid, gap_pass, segment_colors, trilinear, world_to_index
-from .shading import segment_light
+from .shading import ray_lighting
 
 
 def render_plan(plan, lut_exact=False):
@@ -48,7 +48,7 @@ def render_plan(plan, lut_exact=False):
         def valid_cells(tt):
             return cell_is_valid(volume, world_to_index(volume, oo + tt[:, None] * dd + lo))
         valid = valid_cells if volume.has_nonfinite else None
-        light = segment_light(scene, values, oo, dd)
+        light = ray_lighting(scene, values, oo, dd)
 
         if plan.preint is None:
             a = np.where(near_in, 0.5 * (t_near + tk), r0)
@@ -58,8 +58,8 @@ def render_plan(plan, lut_exact=False):
             src = segment_colors(plan, sample, valid, tk, np.where(far_in, t_far, r1), light=light)
             front = segment_colors(plan, sample, valid, r0, tk, light=light)
             src = np.where(near_in[:, None], src, blend_over(src, front))
-        src[src[:, 3] <= 0] = 0
-        acc[rows] = blend_over(acc[rows], src, plan.target)
+        drawn = np.any(src != 0, axis=1)       # GL discards all-zero fragments
+        acc[rows[drawn]] = blend_over(acc[rows[drawn]], src[drawn], plan.target)
 
     # the gap pass: rays that meet no slice inside the box get their whole chord
     per_t = np.ones(len(o)) if plan.shells else cos_theta

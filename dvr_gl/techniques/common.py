@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from ..scene import MAX_LIGHTS, Scene
+from ..scene import MAX_LIGHTS, OPTICAL_MODELS, Scene
 
 TARGETS = {"rgba32f": "f4", "rgba16f": "f2", "rgba8": "f1"}
 
@@ -26,6 +26,9 @@ def check_scene(scene, technique, modes=None, data="volume"):
     if scene.shading and technique not in SHADING_TECHNIQUES:
         raise ValueError(f"{technique} does not light samples yet: shading=True is rendered by "
                          f"{', '.join(SHADING_TECHNIQUES)}")
+    if scene.optical_model != "emission_absorption" and technique not in SHADING_TECHNIQUES:
+        raise ValueError(f"{technique} renders optical_model 'emission_absorption' only; "
+                         f"{scene.optical_model!r} is rendered by {', '.join(SHADING_TECHNIQUES)}")
     kinds = (data,) if isinstance(data, str) else tuple(data)      # a technique may take both
     if scene.is_mesh and "mesh" not in kinds:
         raise ValueError(f"{technique} renders a Volume (a grid); this scene holds a TetMesh: "
@@ -91,6 +94,9 @@ def preintegration_table(scene, step, tables):
     """The scene's pre-integrated table for segments ``step`` long (built once per TF,
     value range and step)."""
     from ..preintegration import build_table
+    if scene.optical_model != "emission_absorption":
+        raise ValueError(f"preintegrate tables emission-absorption segments; optical_model "
+                         f"{scene.optical_model!r} is sampled at segment midpoints (preintegrate=False)")
     volume, tf = scene.volume, scene.tf
     return tables.get("preintegration", volume, tf, step,
                       make=lambda v, t, length: build_table(t, v.data_range, length))
@@ -102,8 +108,9 @@ def preintegration_uniforms(table):
 
 
 def shading_defines(scene, gradients):
-    """The defines of shaders/common/shading.glsl a scene needs: none when its composite
-    samples are unlit; ``gradients`` is "on_the_fly" (six field lookups per lit sample)
+    """The defines of shaders/common/shading.glsl (and the optical model of
+    classification.glsl) a scene needs: none when its composite samples are unlit
+    emission-absorption; ``gradients`` is "on_the_fly" (six field lookups per lit sample)
     or "texture" (one lookup in a gradient texture made once per volume: the same
     gradient, see ``reference.shading.sample_gradients``, for three times the volume's
     memory)."""
@@ -116,6 +123,9 @@ def shading_defines(scene, gradients):
         defines["GRADIENT_TEXTURE"] = 1
     if scene.shaded and not scene.headlight_only:
         defines["LIGHTS"] = 1
+    model = OPTICAL_MODELS.index(scene.optical_model)
+    if model:
+        defines["OPTICAL_MODEL"] = model   # the numbers of shaders/common/classification.glsl
     return defines
 
 

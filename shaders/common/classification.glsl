@@ -30,14 +30,53 @@ float transparencyTF(float s) {
     return lookupTFRow(s, 1).r;
 }
 
+#ifndef OPTICAL_MODEL
+#define OPTICAL_MODEL 0   // 0 emission-absorption, 1 absorption only, 2 emission only
+#endif
+#ifndef SHADING
+#define SHADING 0
+#endif
+
+// The segment length_over_unit unit distances long of a sample whose straight colour and
+// unit-distance opacity are rgba (its value s, for the precise transparency), as
+// premultiplied RGBA under the scene's optical model (NumPy twin:
+// reference.common.segment_of): emission-absorption (c alpha, alpha) with alpha corrected
+// for the length; absorption only (0, alpha); emission only (c tau L, 0), nothing absorbed.
+vec4 segmentOf(vec4 rgba, float s, float length_over_unit) {
+    if (rgba.a <= 0.0) return vec4(0.0);
+    float transparency = rgba.a > 0.5 ? transparencyTF(s) : 1.0 - rgba.a;
+#if OPTICAL_MODEL == 2
+    float log_transparency = rgba.a <= 0.5 ? log1pAccurate(-rgba.a) : log(transparency);
+    return vec4(rgba.rgb * (-log_transparency * max(length_over_unit, 0.0)), 0.0);
+#else
+    float alpha = correctOpacity(rgba.a, transparency, length_over_unit);
+  #if OPTICAL_MODEL == 1
+    return vec4(0.0, 0.0, 0.0, alpha);
+  #else
+    return vec4(rgba.rgb * alpha, alpha);
+  #endif
+#endif
+}
+
 // Premultiplied colour and opacity of a segment length_over_unit unit distances long
 // whose field value is s (NumPy twin: reference.common.classified_segment).
 vec4 classifiedSegment(float s, float length_over_unit) {
+    return segmentOf(applyTF(s), s, length_over_unit);
+}
+
+#if SHADING
+vec3 litColor(vec3 color, vec3 p_world, vec3 ray_dir);   // shaders/common/shading.glsl
+#endif
+
+// The same for a sample taken at p on a ray along ray_dir: lit there (when the scene is)
+// before it is associated with its opacity.
+vec4 sampleSegment(float s, float length_over_unit, vec3 p_world, vec3 ray_dir) {
     vec4 rgba = applyTF(s);
     if (rgba.a <= 0.0) return vec4(0.0);
-    float transparency = rgba.a > 0.5 ? transparencyTF(s) : 1.0 - rgba.a;
-    float alpha = correctOpacity(rgba.a, transparency, length_over_unit);
-    return vec4(rgba.rgb * alpha, alpha);
+#if SHADING
+    rgba.rgb = litColor(rgba.rgb, p_world, ray_dir);
+#endif
+    return segmentOf(rgba, s, length_over_unit);
 }
 
 #endif

@@ -83,6 +83,11 @@ vec3 shadeBlinnPhong(vec3 color, vec3 grad, vec3 ray_dir) {
     return color * k.x + k.y;
 }
 
+// A straight colour lit at a sample point (declared in common/classification.glsl).
+vec3 litColor(vec3 color, vec3 p_world, vec3 ray_dir) {
+    return shadeBlinnPhong(color, gradient(p_world), ray_dir);
+}
+
 // A premultiplied segment (c * alpha, alpha) lit: the lit colour, associated with alpha.
 vec4 shadeSegment(vec4 segment, vec3 grad, vec3 ray_dir) {
     vec2 k = phongTerms(grad, ray_dir);

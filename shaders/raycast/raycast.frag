@@ -168,12 +168,12 @@ void main() {
   #endif
             continue;
         }
-        float transparency = rgba.a > 0.5 ? transparencyTF(s) : 1.0 - rgba.a;
-        float alpha = correctOpacity(rgba.a, transparency, len * u_inv_unit);
   #if SHADING
-        rgba.rgb = shadeBlinnPhong(rgba.rgb, gradient(p), dir);
+        rgba.rgb = litColor(rgba.rgb, p, dir);
   #endif
-        compositeFrontToBack(color, alpha_acc, rgba.rgb, alpha);
+        vec4 piece = segmentOf(rgba, s, len * u_inv_unit);
+        color += (1.0 - alpha_acc) * piece.rgb;
+        alpha_acc += (1.0 - alpha_acc) * piece.a;
   #if EARLY_RAY_TERMINATION
         if (1.0 - alpha_acc < u_ert_transmittance) break;
   #endif

@@ -84,7 +84,7 @@ float sampleBetween(vec3 p) {
 #include "common/shading.glsl"
 #endif
 
-// A segment lit with the gradient at p (unchanged without shading or opacity).
+// A pre-integrated segment lit with the gradient at p (unchanged without shading).
 vec4 lit(vec4 segment, vec3 p, vec3 dir) {
 #if SHADING
     if (segment.a > 0.0) return shadeSegment(segment, gradient(p), dir);
@@ -128,7 +128,7 @@ void main() {
         p = origin + (0.5 * (a + b)) * dir;
         s = sampleBetween(p);
     }
-    f_color = lit(classifiedSegment(s, (b - a) * u_inv_unit), p, dir);  // zero for b <= a
+    f_color = sampleSegment(s, (b - a) * u_inv_unit, p, dir);  // zero for b <= a
 #else
     // from this slice to the next one behind it (or to the box exit), and in front of
     // the first slice a ray meets, the piece from the box entry
@@ -142,7 +142,7 @@ void main() {
     }
     f_color = back;
 #endif
-    if (f_color.a <= 0.0) discard;
+    if (f_color == vec4(0.0)) discard;  // emission-only segments have alpha 0
 }
 #else
 // The segment [a, b] of a gap ray, from the two layers around each point.
@@ -152,7 +152,7 @@ vec4 segmentColor(vec3 origin, vec3 dir, float a, float b) {
 #if MASK_NONFINITE
     if (!insideValidCell(p)) return vec4(0.0);
 #endif
-    return lit(classifiedSegment(sampleBetween(p), (b - a) * u_inv_unit), p, dir);
+    return sampleSegment(sampleBetween(p), (b - a) * u_inv_unit, p, dir);
 #else
 #if MASK_NONFINITE
     if (!insideValidCell(origin + (0.5 * (a + b)) * dir)) return vec4(0.0);
@@ -185,6 +185,6 @@ void main() {
         }
     }
     f_color = chordColor(origin, dir, range.x, range.y, u_slice_distance);
-    if (f_color.a <= 0.0) discard;
+    if (f_color == vec4(0.0)) discard;  // emission-only segments have alpha 0
 }
 #endif

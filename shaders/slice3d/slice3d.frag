@@ -61,11 +61,7 @@ vec4 segmentColor(vec3 origin, vec3 dir, float a, float b) {
 #if MASK_NONFINITE
     if (!insideValidCell(p)) return vec4(0.0);
 #endif
-    vec4 segment = classifiedSegment(sampleVolume(p), (b - a) * u_inv_unit);
-#if SHADING
-    if (segment.a > 0.0) segment = shadeSegment(segment, gradient(p), dir);
-#endif
-    return segment;
+    return sampleSegment(sampleVolume(p), (b - a) * u_inv_unit, p, dir);
 }
 #else
 vec4 segmentColor(vec3 origin, vec3 dir, float a, float b) {
@@ -109,7 +105,7 @@ void main() {
     }
     f_color = back;
 #endif
-    if (f_color.a <= 0.0) discard;  // blending nothing is a no-op; skip the write
+    if (f_color == vec4(0.0)) discard;  // emission-only segments have alpha 0  // blending nothing is a no-op; skip the write
 }
 #else
 #include "common/slice_gap.glsl"
@@ -136,6 +132,6 @@ void main() {
         if (sliceInside(i, sliceT(i, cos_theta), range)) discard;
     }
     f_color = chordColor(origin, dir, range.x, range.y, u_step);
-    if (f_color.a <= 0.0) discard;
+    if (f_color == vec4(0.0)) discard;  // emission-only segments have alpha 0
 }
 #endif
