@@ -6,11 +6,13 @@ Speed, per data set (the chest CT and the CT head, as in the peer suite) and ste
 
 - dvr_gl ``raycast`` and ``slice3d`` unlit, lit with gradients on the fly (six field
   lookups per lit sample) and lit from the gradient texture (one lookup);
+- ``raycast`` with each illustration term alone (boundary, silhouette, tone, depth cue)
+  and lit with all four;
 - VTK's GPU ray caster unlit and with ``ShadeOn()`` (same ka, kd, ks, shininess), at the
   same step,
 
 all taken round robin within one data set and step (``bench.interleaved_frames``), each
-frame read back. ``cost`` divides a lit row by the same renderer's unlit row. RMSE
+frame read back. ``cost`` divides a row by the same renderer's plain row. RMSE
 against the exact image (lit or unlit, as the row) at ``--error-size`` (128).
 
 Accuracy: the lit Marschner-Lobb phantom (41^3, ``--error-size``), ``raycast`` and
@@ -33,19 +35,33 @@ from .bench import _fmt, _load_datasets, _machine, interleaved_frames, renderer_
 from .progress import Progress
 from .scene import Scene
 
-CONFIGS = (  # (label, kind, technique, lit, options)
-    ("raycast", "dvr_gl", "raycast", False, {}),
-    ("raycast lit", "dvr_gl", "raycast", True, {}),
-    ("raycast lit texture", "dvr_gl", "raycast", True, {"gradients": "texture"}),
-    ("slice3d", "dvr_gl", "slice3d", False, {}),
-    ("slice3d lit", "dvr_gl", "slice3d", True, {}),
-    ("slice3d lit texture", "dvr_gl", "slice3d", True, {"gradients": "texture"}),
-    ("VTK GPU raycast", "vtk", None, False, {}),
-    ("VTK GPU raycast ShadeOn", "vtk", None, True, {}),
+ALL_TERMS = ("boundary", "silhouette", "tone", "depth_cue")
+PLAIN, LIT = (False, ()), (True, ())
+CONFIGS = (  # (label, kind, technique, (lit, illustration terms), options, the row its cost divides by)
+    ("raycast", "dvr_gl", "raycast", PLAIN, {}, None),
+    ("raycast lit", "dvr_gl", "raycast", LIT, {}, "raycast"),
+    ("raycast lit texture", "dvr_gl", "raycast", LIT, {"gradients": "texture"}, "raycast"),
+    ("raycast +boundary", "dvr_gl", "raycast", (False, ("boundary",)), {}, "raycast"),
+    ("raycast +silhouette", "dvr_gl", "raycast", (False, ("silhouette",)), {}, "raycast"),
+    ("raycast +tone", "dvr_gl", "raycast", (False, ("tone",)), {}, "raycast"),
+    ("raycast +depth_cue", "dvr_gl", "raycast", (False, ("depth_cue",)), {}, "raycast"),
+    ("raycast lit +all four", "dvr_gl", "raycast", (True, ALL_TERMS), {}, "raycast"),
+    ("raycast lit +all four texture", "dvr_gl", "raycast", (True, ALL_TERMS), {"gradients": "texture"}, "raycast"),
+    ("slice3d", "dvr_gl", "slice3d", PLAIN, {}, None),
+    ("slice3d lit", "dvr_gl", "slice3d", LIT, {}, "slice3d"),
+    ("slice3d lit texture", "dvr_gl", "slice3d", LIT, {"gradients": "texture"}, "slice3d"),
+    ("VTK GPU raycast", "vtk", None, PLAIN, {}, None),
+    ("VTK GPU raycast ShadeOn", "vtk", None, LIT, {}, "VTK GPU raycast"),
 )
+VARIANTS = sorted({c[3] for c in CONFIGS})
 CONVERGENCE_STEPS = (1.0, 0.5, 0.25, 0.125, 0.0625)
-CSV_FIELDS = ["dataset", "step_voxels", "renderer", "lit", "width", "ms_median", "ms_min", "cost",
+CSV_FIELDS = ["dataset", "step_voxels", "renderer", "lit", "terms", "width", "ms_median", "ms_min", "cost",
               "time_vs_vtk", "error_size", "rmse", "max_abs", "psnr"]
+
+
+def variant(scene, lit_terms):
+    lit, terms = lit_terms
+    return scene.replace(shading=lit, illustration=terms)
 
 
 def _timed_rows(gl, peers, name, scene, step_vox, repeats, progress, exact_images):
@@ -54,37 +70,37 @@ def _timed_rows(gl, peers, name, scene, step_vox, repeats, progress, exact_image
     every frame would time VTK's rebuilds), or is empty."""
     step = step_vox * scene.volume.min_spacing
     configs = [c for c in CONFIGS if c[1] != "vtk" or peers]
-    lit_scene = scene.replace(shading=True)
     calls = []
-    for label, kind, technique, lit, opts in configs:
-        s = lit_scene if lit else scene
+    for label, kind, technique, lit_terms, opts, _ in configs:
+        s = variant(scene, lit_terms)
         if kind == "vtk":
-            peers[lit].setup(s, step)
-            calls.append(peers[lit].frame)
+            peers[lit_terms[0]].setup(s, step)
+            calls.append(peers[lit_terms[0]].frame)
         else:
             calls.append(functools.partial(gl.render, s, technique=technique, step=step, **opts))
     _, times = interleaved_frames(calls, repeats, lambda k, i: progress.advance(
         f"{name} step {step_vox:g}: {configs[k][0]} " + ("warm-up" if i < 0 else f"frame {i + 1}/{repeats}")))
     rows = []
-    for (label, kind, technique, lit, opts), ts in zip(configs, times):
-        small = exact_images[lit][0]
+    for (label, kind, technique, lit_terms, opts, base), ts in zip(configs, times):
+        small, exact = exact_images[lit_terms]
         if kind == "vtk":
-            peers[lit].setup(small, step)
-            image = peers[lit].frame()
+            peers[lit_terms[0]].setup(small, step)
+            image = peers[lit_terms[0]].frame()
         else:
             image = gl.render(small, technique=technique, step=step, **opts)
-        err = metrics.compare(image, exact_images[lit][1])
-        rows.append({"dataset": name, "step_voxels": step_vox, "renderer": label, "lit": lit,
+        err = metrics.compare(image, exact)
+        rows.append({"dataset": name, "step_voxels": step_vox, "renderer": label, "lit": lit_terms[0],
+                     "terms": "+".join(lit_terms[1]), "base": base,
                      "width": scene.width, "ms_median": 1e3 * float(np.median(ts)), "ms_min": 1e3 * min(ts),
                      "error_size": small.width, "rmse": err["rmse"], "max_abs": err["max_abs"],
                      "psnr": err["psnr"], "cost": None, "time_vs_vtk": None})
-    unlit = {r["renderer"]: r for r in rows if not r["lit"]}
+    by_label = {r["renderer"]: r for r in rows}
     vtk = {r["lit"]: r for r in rows if r["renderer"].startswith("VTK")}
     for r in rows:
-        base = unlit.get(r["renderer"].split(" lit")[0].replace(" ShadeOn", ""))
-        if r["lit"] and base is not None:
+        base = by_label.get(r.pop("base"))
+        if base is not None:
             r["cost"] = r["ms_median"] / base["ms_median"]
-        if r["lit"] in vtk and not r["renderer"].startswith("VTK"):
+        if not r["terms"] and r["lit"] in vtk and not r["renderer"].startswith("VTK"):
             r["time_vs_vtk"] = r["ms_median"] / vtk[r["lit"]]["ms_median"]
     return rows
 
@@ -128,7 +144,7 @@ def run_shading(args, err=None):
             print(f"dvr-gl bench: VTK not available ({e}); VTK rows skipped", file=err)
     sets = _load_datasets(names, args.chest, err)
     n_configs = sum(1 for c in CONFIGS if c[1] != "vtk" or peers)
-    progress = Progress(len(sets) * (2 + len(steps) * n_configs * (1 + args.repeats)) + 1, stream=err)
+    progress = Progress(len(sets) * (len(VARIANTS) + len(steps) * n_configs * (1 + args.repeats)) + 1, stream=err)
     rows, info = [], {}
     try:
         with dvr_gl.Renderer(backend=args.backend) as gl:
@@ -136,11 +152,13 @@ def run_shading(args, err=None):
             for name, volume, tf, camera in sets:
                 scene = Scene(volume, tf, camera, width=args.size, height=args.size)
                 exact_images = {}
-                for lit in (False, True):
-                    small = Scene(volume, tf, camera, width=args.error_size, height=args.error_size, shading=lit)
-                    progress.begin(f"{name}: exact image{' (lit)' if lit else ''}")
-                    exact_images[lit] = (small, exact_image(small))
-                    progress.advance(f"{name}: exact image{' (lit)' if lit else ''}")
+                for lit_terms in VARIANTS:
+                    small = variant(Scene(volume, tf, camera, width=args.error_size, height=args.error_size),
+                                    lit_terms)
+                    what = f"{name}: exact image, {'lit' if lit_terms[0] else 'unlit'} {'+'.join(lit_terms[1])}"
+                    progress.begin(what)
+                    exact_images[lit_terms] = (small, exact_image(small))
+                    progress.advance(what)
                 for step_vox in steps:
                     rows.extend(_timed_rows(gl, peers, name, scene, step_vox, args.repeats, progress, exact_images))
             progress.begin("lit Marschner-Lobb convergence")
@@ -183,7 +201,7 @@ def run_shading_bench(args) -> int:
     rows, info = run_shading(args)
     vtk = info.get("vtk", {}).get("renderer", "not run")
     print(f"{renderer_line(info)}; VTK: {vtk}; {info['size']}x{info['size']}, median of {info['repeats']} "
-          f"frames; cost = lit / unlit of the same renderer; t/VTK = / VTK's row with the same lighting; "
+          f"frames; cost = / the same renderer plain; t/VTK = / VTK's row with the same lighting; "
           f"RMSE at {info['error_size']}x{info['error_size']}")
     print(format_shading_table(rows))
     print(format_convergence(info["convergence"]))

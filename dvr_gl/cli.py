@@ -105,6 +105,15 @@ def _background_value(text):
 _background = _arg_type(_background_value, "background")
 
 
+def _illustration(text):
+    from .scene import ILLUSTRATION_TERMS
+    names = [t.strip() for t in text.split(",") if t.strip()]
+    unknown = [n for n in names if n not in ILLUSTRATION_TERMS]
+    if not names or unknown:
+        raise argparse.ArgumentTypeError(f"terms are {', '.join(ILLUSTRATION_TERMS)}, got {text!r}")
+    return tuple(names)
+
+
 def _light(text):
     from .inputs import parse_light
     return _arg_type(parse_light, "light")(text)
@@ -151,10 +160,15 @@ def add_render_options(r):
                    help="slice3d: slice polygons made on the CPU or in the vertex shader (default: cpu)")
     r.add_argument("--shells", action="store_true",
                    help="slice3d: slice along spherical shells around the eye instead of planes")
-    r.add_argument("--optical-model", choices=("emission_absorption", "absorption", "emission"),
+    r.add_argument("--optical-model", choices=("emission_absorption", "absorption", "emission", "sabella"),
                    help="composite mode: emission and absorption (default), absorption only (C = 0, "
-                        "A = 1 - T), or emission only (C = integral of c tau, A = 0; written over black "
-                        "unless --background)")
+                        "A = 1 - T), emission only (C = integral of c tau, A = 0; written over black "
+                        "unless --background), or sabella (raycast: brightness 1 - T, hue from the "
+                        "ray's peak value, saturation fading with its depth)")
+    r.add_argument("--illustration", type=_illustration, metavar="TERM[,TERM...]",
+                   help="composite mode: Ebert-Rheingans terms with their default parameters: boundary, "
+                        "silhouette (extinction scaled by gradient magnitude / by view angle), tone "
+                        "(warm-to-cool colour), depth_cue (darker with depth)")
     r.add_argument("--shading", action="store_true",
                    help="light the samples with a Blinn-Phong headlight (composite mode; raycast, slice3d, slice2d)")
     r.add_argument("--light", type=_light, action="append", metavar="SPACE:X,Y,Z[:I]",
@@ -509,6 +523,8 @@ def cmd_render(args, out=None):
     if args.shading and args.technique not in ("raycast", "slice2d", "slice3d"):
         raise UsageError("--shading", f"applies to --technique raycast, slice3d or slice2d, not {args.technique}")
     if args.optical_model not in (None, "emission_absorption"):
+        if args.optical_model == "sabella" and args.technique != "raycast":
+            raise UsageError("--optical-model", f"sabella applies to --technique raycast, not {args.technique}")
         if args.technique not in ("raycast", "slice2d", "slice3d"):
             raise UsageError("--optical-model", f"{args.optical_model} applies to --technique raycast, slice3d or "
                                                 f"slice2d, not {args.technique}")
@@ -519,8 +535,8 @@ def cmd_render(args, out=None):
         raise UsageError("--light", "is only used with --shading (or --mode isosurface)")
     if args.light and len(args.light) > 4:
         raise UsageError("--light", f"at most 4 lights, got {len(args.light)}")
-    if args.gradients is not None and not (args.shading or mode == "isosurface"):
-        raise UsageError("--gradients", "is only used with --shading (or --mode isosurface)")
+    if args.gradients is not None and not (args.shading or mode == "isosurface" or args.illustration):
+        raise UsageError("--gradients", "is only used with --shading, --illustration or --mode isosurface")
     if args.dtype is not None:
         try:
             dvr_io._parse_dtype(args.dtype)
@@ -534,6 +550,16 @@ def cmd_render(args, out=None):
                             fov=args.fov, ortho=args.ortho)
     width, height = args.size
     optical = {"optical_model": args.optical_model} if args.optical_model else {}
+    if args.illustration:
+        if mode != "composite":
+            raise UsageError("--illustration", f"applies to --mode composite, not --mode {mode}")
+        if args.technique not in ("raycast", "slice2d", "slice3d"):
+            raise UsageError("--illustration", f"applies to --technique raycast, slice3d or slice2d, "
+                                               f"not {args.technique}")
+        if args.preintegrate and {"boundary", "silhouette"} & set(args.illustration):
+            raise UsageError("--illustration", "boundary and silhouette scale the extinction per sample; "
+                                               "leave out --preintegrate")
+        optical["illustration"] = args.illustration
     try:
         scene = Scene(volume, tf, camera, width=width, height=height, mode=mode, iso_value=args.iso,
                       shading=args.shading, **({"lights": tuple(args.light)} if args.light else {}), **optical)

@@ -23,8 +23,55 @@ SUPPORTED_DTYPES = (np.uint8, np.uint16, np.int16, np.float32, np.float64)
 MODES = ("composite", "mip", "minip", "average", "isosurface")
 SHADED_MODES = ("composite", "isosurface")
 # composite mode's optical models (Max 1995): emission and absorption (the contract's
-# default), absorption only (C = 0, A = 1 - T), emission only (C = integral c tau dt, A = 0)
-OPTICAL_MODELS = ("emission_absorption", "absorption", "emission")  # modes a lit sample has a meaning in (isosurface always is)
+# default), absorption only (C = 0, A = 1 - T), emission only (C = integral c tau dt, A = 0);
+# and Sabella's (1988) colouring: brightness A = 1 - T, hue from the TF colour at the ray's
+# peak value, saturation fading with the peak's depth
+OPTICAL_MODELS = ("emission_absorption", "absorption", "emission", "sabella")
+# The volume-illustration terms of Ebert and Rheingans (2000) a lit or unlit composite
+# scene switches on by name, with their default parameters (see Scene):
+ILLUSTRATION_TERMS = {
+    "boundary": (0.2, 0.8, 1.0),                      # k_gc, k_gs, k_ge
+    "silhouette": (0.2, 0.8, 1.0),                    # k_sc, k_ss, k_se
+    "tone": ((0.4, 0.4, 0.0), (0.0, 0.0, 0.4)),       # warm, cool (RGB)
+    "depth_cue": (0.6,),                              # strength
+}
+
+
+def _illustration(value):
+    """{term: parameters} from None, a term name, an iterable of names or a dict."""
+    if value is None:
+        return {}
+    if isinstance(value, str):
+        value = [value]
+    items = value.items() if isinstance(value, dict) else ((name, None) for name in value)
+    out = {}
+    for name, params in items:
+        if name not in ILLUSTRATION_TERMS:
+            raise ValueError(f"illustration terms are {', '.join(ILLUSTRATION_TERMS)}, got {name!r}")
+        default = ILLUSTRATION_TERMS[name]
+        params = default if params is None else params
+        if name == "tone":
+            try:
+                warm, cool = (tuple(float(v) for v in rgb) for rgb in params)
+            except (TypeError, ValueError):
+                raise ValueError(f"tone must be (warm RGB, cool RGB), got {params!r}") from None
+            if len(warm) != 3 or len(cool) != 3 or not all(math.isfinite(v) and v >= 0 for v in warm + cool):
+                raise ValueError(f"tone must be two RGB triples of finite non-negative numbers, got {params!r}")
+            out[name] = (warm, cool)
+            continue
+        try:
+            params = tuple(float(v) for v in (params if np.ndim(params) else [params]))
+        except (TypeError, ValueError):
+            raise ValueError(f"{name} must be {len(default)} numbers, got {params!r}") from None
+        if len(params) != len(default) or not all(math.isfinite(v) for v in params):
+            raise ValueError(f"{name} must be {len(default)} finite numbers, got {params!r}")
+        if name in ("boundary", "silhouette") and not (params[0] > 0 and params[1] >= 0 and params[2] > 0):
+            raise ValueError(f"{name} needs a positive constant term (it keeps opaque material opaque), a "
+                             f"non-negative scale and a positive exponent, got {params!r}")
+        if name == "depth_cue" and not 0 <= params[0] <= 1:
+            raise ValueError(f"depth_cue strength must be in [0, 1], got {params[0]!r}")
+        out[name] = params
+    return out  # modes a lit sample has a meaning in (isosurface always is)
 MAX_IMAGE_SIDE = 65536  # larger than one GL target: rendered in tiles
 
 
@@ -487,7 +534,7 @@ class Scene:
 
     def __init__(self, volume, tf, camera, width=512, height=512, mode="composite",
                  iso_value=None, shading=False, phong=(0.3, 0.7, 0.2, 32.0), lights=(HEADLIGHT,),
-                 optical_model="emission_absorption"):
+                 optical_model="emission_absorption", illustration=None):
         if not isinstance(volume, (Volume, TetMesh)):
             raise TypeError(f"volume must be a dvr_gl.Volume or dvr_gl.TetMesh, got {type(volume).__name__}")
         for name, value, cls in (("tf", tf, TransferFunction), ("camera", camera, Camera)):
@@ -526,11 +573,17 @@ class Scene:
             if optical_model == "absorption" and shading:
                 raise ValueError("optical_model='absorption' emits nothing, so there is nothing to light: "
                                  "got shading=True")
+            if optical_model == "sabella" and (shading or illustration):
+                raise ValueError("optical_model='sabella' colours each ray from its peak value; shading and "
+                                 "illustration terms do not apply")
             if optical_model == "emission":
                 opaque = [s for s, a in tf.opacity_points if a >= 1]
                 if opaque:
                     raise ValueError(f"optical_model='emission' needs opacities below 1 (tau is infinite where "
                                      f"alpha = 1), got alpha = 1 at s = {opaque[0]:g}")
+        illustration = _illustration(illustration)
+        if illustration and mode != "composite":
+            raise ValueError(f"illustration terms apply to mode 'composite', got mode={mode!r}")
         if isinstance(lights, Light):
             lights = (lights,)
         try:
@@ -544,6 +597,7 @@ class Scene:
         self.camera = camera
         self.lights = lights
         self.optical_model = optical_model
+        self.illustration = illustration
         self.width = int(width)
         self.height = int(height)
         self.mode = mode
@@ -586,7 +640,7 @@ class Scene:
         args = dict(volume=self.volume, tf=self.tf, camera=self.camera, width=self.width,
                     height=self.height, mode=self.mode, iso_value=self.iso_value,
                     shading=self.shading, phong=self.phong, lights=self.lights,
-                    optical_model=self.optical_model)
+                    optical_model=self.optical_model, illustration=dict(self.illustration))
         args.update(changes)
         return Scene(**args)
 
@@ -601,6 +655,8 @@ class Scene:
             h.update(repr(tuple(light.key() for light in self.lights)).encode())
         if self.optical_model != "emission_absorption":
             h.update(self.optical_model.encode())
+        if self.illustration:
+            h.update(repr(sorted(self.illustration.items())).encode())
         return h.hexdigest()
 
     def __repr__(self):

@@ -56,7 +56,7 @@ import numpy as np
 
 from . import io as dvr_io
 from .gl.context import current, idle_framebuffer
-from .scene import MODES, OPTICAL_MODELS, Camera, Scene, default_camera
+from .scene import ILLUSTRATION_TERMS, MODES, OPTICAL_MODELS, Camera, Scene, default_camera
 from .viewer_overlay import OverlayDrawer, TFEditor
 
 PROG = "dvr-gl view"
@@ -93,7 +93,8 @@ dvr-gl view: keys and mouse
   m / M                next / previous mode (composite, mip, minip, average, isosurface)
   , / .                iso value down / up (isosurface mode; shift: 5x)
   l                    shading on / off
-  x                    optical model: emission-absorption, absorption only, emission only
+  x                    optical model: emission-absorption, absorption only, emission only, Sabella
+  i                    illustration: none, boundary, silhouette, tone, depth cue, all four
   p                    pre-integration on / off (techniques that offer it)
   c                    cell order mpvo / centroid (tetra, for meshes)
   - / =                coarser / finer step (slice2d: fewer / more interpolated slices;
@@ -461,6 +462,7 @@ class Settings:
     options: dict = field(default_factory=dict)   # technique options (preintegrate, interpolate, ...)
     shading: bool = False                # lit composite (key l switches it)
     optical_model: str = "emission_absorption"   # composite's optical model (key x cycles it)
+    illustration: tuple = ()             # Ebert-Rheingans terms by name (key i cycles them)
     lights: tuple | None = None          # dvr_gl.Light objects; None: the headlight
 
 
@@ -505,6 +507,7 @@ class Viewer:
         self.iso = settings.iso if settings.iso is not None else self._default_iso()
         self.shading = settings.shading
         self.optical_model = settings.optical_model
+        self.illustration = tuple(settings.illustration)
         self.lights = settings.lights
         self.step = settings.step          # None: the technique's default
         self.options = dict(settings.options)  # technique options: command line, then keys
@@ -701,7 +704,7 @@ class Viewer:
         return Scene(self.volume, tf or self.tf, self.orbit.camera(), width=width, height=height,
                      mode=self.mode, iso_value=self.iso if self.mode == "isosurface" else None,
                      shading=self.shading, **({"lights": self.lights} if self.lights else {}),
-                     optical_model=self.optical_model)
+                     optical_model=self.optical_model, illustration=self.illustration)
 
     def _options(self, name=None):
         info = self.techniques[name or self.technique]
@@ -735,10 +738,12 @@ class Viewer:
 
     def _state(self):
         """The rendering choices (not the camera or the transfer function)."""
-        return (self.technique, self.mode, self.iso, self.shading, self.optical_model, dict(self.options), self.step)
+        return (self.technique, self.mode, self.iso, self.shading, self.optical_model, self.illustration,
+                dict(self.options), self.step)
 
     def _restore(self, state, changed=True):
-        (self.technique, self.mode, self.iso, self.shading, self.optical_model, options, self.step) = state
+        (self.technique, self.mode, self.iso, self.shading, self.optical_model, self.illustration, options,
+         self.step) = state
         self.options = dict(options)
         if changed:
             self._changed()
@@ -917,6 +922,12 @@ class Viewer:
             self.nudge_iso((1 if key == KEY_PERIOD else -1) * (5 if shift else 1))
         elif char == "l":
             self._try(lambda: setattr(self, "shading", not self.shading), "switch shading")
+        elif char == "i":
+            choices = [()] + [(name,) for name in ILLUSTRATION_TERMS] + [tuple(ILLUSTRATION_TERMS)]
+            current = choices.index(self.illustration) if self.illustration in choices else 0
+            terms = choices[(current + 1) % len(choices)]
+            if self._try(lambda: setattr(self, "illustration", terms), "use illustration terms"):
+                self.say("illustration " + (", ".join(terms) if terms else "off"))
         elif char == "x":
             models = OPTICAL_MODELS
             model = models[(models.index(self.optical_model) + 1) % len(models)]
@@ -1476,7 +1487,8 @@ def settings_from_args(args) -> Settings:
                     tf_out=args.tf_out, editor=not args.hide_editor, vsync=args.frames is None,
                     options=options, shading=bool(getattr(args, "shading", False)),
                     lights=tuple(args.light) if getattr(args, "light", None) else None,
-                    optical_model=getattr(args, "optical_model", None) or "emission_absorption")
+                    optical_model=getattr(args, "optical_model", None) or "emission_absorption",
+                    illustration=tuple(getattr(args, "illustration", None) or ()))
 
 
 def open_viewer(argv) -> Viewer:

@@ -117,6 +117,9 @@ BAD = [
     (["--shading", "--mode", "mip"], "--shading", "not --mode mip"),
     (["--shading", "--technique", "particles"], "--shading", "not particles"),
     (["--gradients", "texture"], "--gradients", "only used with --shading"),
+    (["--illustration", "halo"], "argument --illustration", "'halo'"),
+    (["--illustration", "tone", "--mode", "mip"], "--illustration", "not --mode mip"),
+    (["--illustration", "boundary", "--preintegrate"], "--illustration", "leave out --preintegrate"),
     (["--gradients", "sobel"], "argument --gradients", "'sobel'"),
     (["--light", "world:1,1,0"], "--light", "only used with --shading"),
     (["--shading", "--light", "sun:1,1,0"], "argument --light", "'sun:1,1,0'"),
@@ -127,6 +130,7 @@ BAD = [
     (["--optical-model", "absorption", "--shading"], "--optical-model", "nothing to light"),
     (["--optical-model", "emission", "--technique", "splat"], "--optical-model", "not splat"),
     (["--optical-model", "emission", "--preintegrate"], "--optical-model", "leave out --preintegrate"),
+    (["--optical-model", "sabella", "--technique", "slice3d"], "--optical-model", "sabella applies to --technique raycast"),
 ]
 
 
@@ -653,8 +657,11 @@ def test_shading_bench_quick_run(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "lit Marschner-Lobb against exact" in out
     rows = {r["renderer"]: r for r in csv.DictReader(open(tmp_path / "s.csv"))}
-    assert set(rows) == {"raycast", "raycast lit", "raycast lit texture", "slice3d", "slice3d lit",
+    assert set(rows) == {"raycast", "raycast lit", "raycast lit texture", "raycast +boundary",
+                         "raycast +silhouette", "raycast +tone", "raycast +depth_cue", "raycast lit +all four",
+                         "raycast lit +all four texture", "slice3d", "slice3d lit",
                          "slice3d lit texture", "VTK GPU raycast", "VTK GPU raycast ShadeOn"}
+    assert float(rows["raycast +tone"]["cost"]) > 0 and float(rows["raycast +tone"]["rmse"]) < 1e-2
     assert float(rows["raycast lit"]["cost"]) > 0 and float(rows["VTK GPU raycast ShadeOn"]["cost"]) > 0
     assert float(rows["raycast lit"]["rmse"]) < 1e-2
     convergence = json.load(open(tmp_path / "s.json"))["info"]["convergence"]
@@ -667,7 +674,7 @@ def test_render_optical_models(renderer, tiny, capsys):
     d, _ = tiny
     vol = load_volume(d / "tiny.npy")
     scene = dvr_gl.Scene(vol, auto_preset(vol), dvr_gl.default_camera(vol), 32, 32)
-    for model, background in (("absorption", None), ("emission", (0.0, 0.0, 0.0))):
+    for model, background in (("absorption", None), ("emission", (0.0, 0.0, 0.0)), ("sabella", None)):
         out = d / f"{model}.png"
         code, stdout, err = _run(["render", d / "tiny.npy", "--size", "32x32", "--optical-model", model,
                                   "--out", out], capsys)
@@ -675,3 +682,15 @@ def test_render_optical_models(renderer, tiny, capsys):
         image = renderer.render(scene.replace(optical_model=model))
         assert np.array_equal(_png(out)[1], to_png_array(image, background))
         assert ("RGB over background" in stdout) == (background is not None)
+
+
+def test_render_illustration(renderer, tiny, capsys):
+    d, _ = tiny
+    vol = load_volume(d / "tiny.npy")
+    scene = dvr_gl.Scene(vol, auto_preset(vol), dvr_gl.default_camera(vol), 32, 32,
+                         illustration=("silhouette", "tone"))
+    out = d / "illustrated.png"
+    code, _, err = _run(["render", d / "tiny.npy", "--size", "32x32", "--illustration", "silhouette,tone",
+                         "--out", out], capsys)
+    assert code == 0, err
+    assert np.array_equal(_png(out)[1], to_png_array(renderer.render(scene)))

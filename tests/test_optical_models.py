@@ -168,3 +168,74 @@ def test_the_models_are_refused_where_they_are_not_defined():
     assert get_technique("slice3d").make_plan(scene).defines.get("OPTICAL_MODEL") == 2
     assert "OPTICAL_MODEL" not in get_technique("slice3d").make_plan(
         scene.replace(optical_model="emission_absorption")).defines
+
+
+# -- Sabella (1988) -----------------------------------------------------------------------------
+
+@pytest.mark.parametrize("camera", ["perspective", "ortho", "eye_inside"])
+def test_sabella_matches_reference(renderer, camera):
+    """Sabella's opacity is absorption only's, within its derived bound. Its colour comes
+    from the ray's peak sample: a pixel whose two highest samples differ by less than
+    the float32 value error may take the other one, whose depth is a step away, so all
+    but a few pixels (none here) must agree to 1e-4."""
+    scene = dvr_gl.Scene(RAMP, TF, cameras(RAMP)[camera], width=W, height=H, optical_model="sabella")
+    opts = {"step": 0.5}
+    gl = renderer.render(scene, **opts)
+    ref = reference.render(scene, **opts)
+    plan = get_technique("raycast").make_plan(scene, **opts)
+    assert plan.occupancy is None and plan.ert_transmittance == 0   # the peak needs every sample
+    assert ref[..., 3].max() > 0.5 and ref[..., :3].max() > 0.3
+    assert np.abs(gl[..., 3] - ref[..., 3]).max() <= derived_tolerance(plan)
+    assert (np.abs(gl - ref).max(axis=-1) > 1e-4).sum() <= 2
+
+
+@pytest.mark.parametrize("camera", ["perspective", "ortho", "eye_inside"])
+def test_exact_sabella_of_a_constant_box_is_the_closed_form(camera):
+    """Every point ties for the peak, so the peak is where the ray enters: its depth
+    gives the saturation; the intensity is 1 - e^(-tau L)."""
+    from dvr_gl.reference.common import sabella_color
+    from dvr_gl.reference.shading import depth_range
+    volume = constant_box()
+    scene = dvr_gl.Scene(volume, BOX_TF, box_cameras(volume)[camera], width=W, height=H, optical_model="sabella")
+    o, d, t0, t1 = box_rays(scene)
+    lo, _ = volume.bounds
+    near, far = depth_range(scene)
+    depth = ((o + lo - scene.camera.eye) @ scene.camera.forward + t0 * (d @ scene.camera.forward) - near) / (far - near)
+    tau = -math.log(1 - ALPHA) / UNIT
+    intensity = -np.expm1(-tau * np.maximum(t1 - t0, 0))
+    hit = t1 > t0
+    expected = np.zeros((H * W, 4))
+    expected[hit] = sabella_color(np.broadcast_to(COLOUR, (hit.sum(), 3)), intensity[hit], depth[hit])
+    assert expected[..., :3].max() > 0.2 and len(np.unique(np.round(expected[hit, 0], 6))) > 10
+    np.testing.assert_allclose(reference.exact(scene, cache=False), expected.reshape(H, W, 4), rtol=0, atol=1e-12)
+
+
+def test_sabella_error_against_exact_shrinks(renderer):
+    """The peak's value converges at second order, its position (hence the saturation)
+    at first order: the error falls at least like the step."""
+    volume = marschner_lobb(41)
+    scene = dvr_gl.Scene(volume, marschner_lobb_tf(), dvr_gl.default_camera(volume, azimuth=30, elevation=20),
+                         width=48, height=48, optical_model="sabella")
+    exact = reference.exact(scene)
+    h = volume.min_spacing
+    errors = [metrics.rmse(renderer.render(scene, step=k * h), exact) for k in (1.0, 0.5, 0.25, 0.125)]
+    orders = np.log2(np.array(errors[:-1]) / np.array(errors[1:]))
+    assert all(e1 < e0 for e0, e1 in zip(errors, errors[1:])), errors
+    assert orders.mean() > 0.8, orders
+
+
+def test_hsv_twins_round_trip():
+    from dvr_gl.reference.common import hsv_to_rgb, rgb_to_hsv
+    rgb = np.random.default_rng(1).random((500, 3))
+    rgb[:5] = [[1, 0, 0], [0, 1, 0], [0, 0, 1], [0.5, 0.5, 0.5], [0, 0, 0]]
+    np.testing.assert_allclose(hsv_to_rgb(rgb_to_hsv(rgb)), rgb, rtol=0, atol=1e-12)
+
+
+def test_sabella_is_refused_where_it_is_not_defined():
+    camera = cameras(RAMP)["perspective"]
+    with pytest.raises(ValueError, match="shading and illustration terms do not apply"):
+        dvr_gl.Scene(RAMP, TF, camera, optical_model="sabella", shading=True)
+    scene = dvr_gl.Scene(RAMP, TF, camera, width=16, height=16, optical_model="sabella")
+    for name in ("slice3d", "slice2d", "particles"):
+        with pytest.raises(ValueError, match="optical_model 'sabella' is rendered by raycast"):
+            get_technique(name).make_plan(scene)

@@ -71,16 +71,20 @@ def lit_tolerance(plan, unlit, g_floor):
     a_i T_i of a ray add up to its opacity, at most 1."""
     ka, kd, ks, shininess = plan.scene.phong
     intensity = sum(light.intensity for light in plan.scene.lights)
+    dndl = 2 * gradient_error(plan) / g_floor + 16 * U32
+    return (ka + (kd + ks) * intensity) * unlit + intensity * (kd + ks * shininess) * dndl
+
+
+def gradient_error(plan):
+    """Bound on |g_GL - g| (see ``lit_tolerance``)."""
     v = plan.scene.volume
     vals = v.values()
     jump = max(float(np.abs(np.diff(vals, axis=a)).max()) for a in range(3))
     value_err = 4 * U32 * float(v.dims.max()) * jump + 16 * U32 * float(np.abs(vals).max())
     g = sample_gradients(v, vals.astype(np.float64))
     g_jump = max(float(np.abs(np.diff(g, axis=a)).max()) for a in range(3))
-    dg = math.sqrt(3) * (value_err / v.min_spacing + 4 * U32 * float(v.dims.max()) * g_jump
-                         + 16 * U32 * float(np.abs(g).max()))
-    dndl = 2 * dg / g_floor + 16 * U32
-    return (ka + (kd + ks) * intensity) * unlit + intensity * (kd + ks * shininess) * dndl
+    return math.sqrt(3) * (value_err / v.min_spacing + 4 * U32 * float(v.dims.max()) * g_jump
+                           + 16 * U32 * float(np.abs(g).max()))
 
 
 VARIANTS = [("raycast", {"step": 0.7, "ert_transmittance": 0.0}), ("slice3d", {"step": 0.7}),
@@ -353,5 +357,5 @@ def test_shading_is_refused_where_it_is_not_defined():
     mesh_scene = dvr_gl.Scene(mesh, TF, dvr_gl.default_camera(mesh), width=16, height=16, shading=True)
     with pytest.raises(ValueError, match="tetra does not light samples yet"):
         get_technique("tetra").make_plan(mesh_scene)
-    with pytest.raises(ValueError, match="shading=True is defined for grids"):
+    with pytest.raises(ValueError, match="shading=True and illustration terms are defined for grids"):
         reference.exact(mesh_scene, cache=False)

@@ -408,9 +408,20 @@ def test_lit_start_with_lights_and_gradient_texture(open_viewer, renderer, tmp_p
     assert v.render_image()[..., :3].max() == 0 and v.render_image()[..., 3].max() > 0.1
     press(v, "l")
     assert "cannot switch shading" in v.messages[-1] and "nothing to light" in v.messages[-1]
-    press(v, "x")
-    press(v, "x")
-    assert v.optical_model == "emission_absorption"
+    for model in ("emission", "sabella", "emission_absorption"):
+        press(v, "x")
+        assert v.optical_model == model
+    # i cycles the illustration terms: each one alone, then all four, then none
+    seen = []
+    for _ in range(6):
+        press(v, "i")
+        seen.append(v.render_arguments()[0].illustration)
+    assert [tuple(t) for t in seen] == [("boundary",), ("silhouette",), ("tone",), ("depth_cue",),
+                                        ("boundary", "silhouette", "tone", "depth_cue"), ()]
+    press(v, "i")
+    v.refine()
+    press(v, "s")
+    assert_matches_headless(v, renderer, png(tmp_path / "l.png"))
 
 
 def test_slice2d_and_modes_it_cannot_render(open_viewer):

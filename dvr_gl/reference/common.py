@@ -122,20 +122,51 @@ def segment_of(rgba, transparency, length_over_unit, model="emission_absorption"
         out = np.concatenate([rgba[..., :3] * weight[..., None], np.zeros(a.shape + (1,))], axis=-1)
     else:
         alpha = correct_opacity(a, x, transparency)
-        rgb = np.zeros(rgba[..., :3].shape) if model == "absorption" else rgba[..., :3] * alpha[..., None]
+        colourless = model in ("absorption", "sabella")    # Sabella colours the ray at its end
+        rgb = np.zeros(rgba[..., :3].shape) if colourless else rgba[..., :3] * alpha[..., None]
         out = np.concatenate([rgb, alpha[..., None]], axis=-1)
     out[a <= 0] = 0
     return out
 
 
+def rgb_to_hsv(c):
+    """(..., 3) RGB in [0, 1] to HSV, hue in [0, 1) (GLSL ``rgbToHsv``)."""
+    c = np.asarray(c, np.float64)
+    r, g, b = c[..., 0], c[..., 1], c[..., 2]
+    mx, mn = c.max(axis=-1), c.min(axis=-1)
+    delta = mx - mn
+    safe = np.where(delta > 0, delta, 1.0)
+    h = np.where(mx == r, (g - b) / safe, np.where(mx == g, 2.0 + (b - r) / safe, 4.0 + (r - g) / safe))
+    h = np.where(delta > 0, np.mod(h / 6.0, 1.0), 0.0)
+    return np.stack([h, np.where(mx > 0, delta / np.where(mx > 0, mx, 1.0), 0.0), mx], axis=-1)
+
+
+def hsv_to_rgb(hsv):
+    """GLSL ``hsvToRgb``."""
+    hsv = np.asarray(hsv, np.float64)
+    k = np.clip(np.abs(np.mod(hsv[..., :1] + np.array([0.0, 2.0, 1.0]) / 3.0, 1.0) * 6.0 - 3.0) - 1.0, 0.0, 1.0)
+    return hsv[..., 2:3] * (1.0 + (k - 1.0) * hsv[..., 1:2])
+
+
+def sabella_color(peak_color, intensity, depth):
+    """Sabella (1988) pixels (..., 4) from the TF colour at each ray's peak value, its
+    integrated intensity and the peak's depth in [0, 1] (GLSL ``sabellaColor``)."""
+    hsv = rgb_to_hsv(peak_color)
+    hsv[..., 1] *= 1.0 - np.clip(depth, 0.0, 1.0)
+    hsv[..., 2] = 1.0
+    intensity = np.asarray(intensity, np.float64)
+    return np.concatenate([hsv_to_rgb(hsv) * intensity[..., None], intensity[..., None]], axis=-1)
+
+
 def classified_segment(classify, transparency, s, length_over_unit, model="emission_absorption", lit=None):
     """Premultiplied RGBA (..., 4) of segments with field value ``s`` (GLSL
-    ``classifiedSegment``, and ``sampleSegment`` with ``lit``: a function lighting the
-    straight colours before they are associated)."""
+    ``classifiedSegment``; ``sampleSegment`` with ``lit``, a function of the straight
+    colours giving (their colours with the sample's terms, the extinction scale))."""
     rgba = classify(s)
     if lit is not None:
         rgba = np.array(rgba, np.float64, copy=True)
-        rgba[..., :3] = lit(rgba[..., :3])
+        rgba[..., :3], scale = lit(rgba[..., :3])
+        length_over_unit = length_over_unit * scale
     return segment_of(rgba, transparency(s), length_over_unit, model)
 
 
@@ -191,7 +222,7 @@ def segment_colors(plan, sample, valid, a, b, lut_exact=False, light=None):
         if light is not None:
             out = light.segments(out, tm)
     else:
-        lit = None if light is None else (lambda rgb: light.colors(rgb, tm))
+        lit = None if light is None else (lambda rgb: light.samples(rgb, tm))
         out = classified_segment(*classifier(plan, lut_exact), sample(tm), (b - a) / plan.scene.tf.unit_distance,
                                  plan.scene.optical_model, lit)
     if valid is not None:

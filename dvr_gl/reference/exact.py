@@ -61,7 +61,7 @@ import numpy as np
 
 from ..scene import Scene
 from .common import ray_box
-from .shading import gradient, gradient_epsilon, phong_terms, scene_lights, shade_blinn_phong
+from .shading import gradient, gradient_epsilon, sample_terms, scene_lights, shade_blinn_phong
 
 __all__ = ["exact", "VERSION"]
 
@@ -201,16 +201,19 @@ class _Classified:
     """The transfer function's tables and the composite integrator over pieces on which
     the field is a cubic in the ray parameter: shared by grids and meshes."""
 
-    # lit composite (grids): (diffuse factor, specular term) at world points seen along
-    # dirs; None leaves colours unlit
+    # composite samples with lighting or illustration terms (grids): ``lighting(points,
+    # dirs)`` gives (colour factor, added colour, extinction scale) at world points seen
+    # along dirs (``shading.SampleTerms.at``); None leaves samples plain. ``scale_floor``
+    # bounds the extinction scale from below (for the error weights).
     lighting = None
+    scale_floor = 1.0
 
     def __init__(self, tf, optical_model="emission_absorption"):
         self.tf = tf
         self.inv_u = 1.0 / tf.unit_distance
         # emission only: nothing absorbs (T = 1 throughout); absorption only: no colour
         self.emission = optical_model == "emission"
-        self.absorption = optical_model == "absorption"
+        self.absorption = optical_model in ("absorption", "sabella")   # no colour along the ray
         K = tf.knots
         self.K = K
         nk = len(K)
@@ -368,7 +371,7 @@ class _Classified:
         line = lambda v: self.a0[m] + self.a1[m] * (v - self.anchor[m])   # noqa: E731
         a = np.minimum(line(lo), line(hi))
         a = np.clip(a, 0.0, _ALPHA_MAX)
-        return -np.log1p(-a) * self.inv_u * sub["h"][i] * (tb - ta)
+        return -np.log1p(-a) * self.inv_u * self.scale_floor * sub["h"][i] * (tb - ta)
 
     def quadrature(self, sub, ta, tb, weight):
         """Adaptive Gauss-Kronrod over sub-pieces [ta, tb] (tau units of each piece): a
@@ -412,13 +415,13 @@ class _Classified:
         if geo is None or len(s) == 0:
             return c
         points = geo["base"][rows] + tau[:, None] * geo["hd"][rows]
-        diffuse, specular = self.lighting(points, geo["dir"][rows])
-        return c * diffuse[:, None] + specular[:, None]
+        factor, offset, _ = self.lighting(points, geo["dir"][rows])
+        return c * factor[:, None] + offset
 
     def gk(self, coef, h, m, cend, ta, tb, geo=None):
         """K15 optical depth and colour of each part, and max |K15 - G7| of the two.
-        With ``geo`` (a lit scene) the colour at each node is lit with the gradient
-        there."""
+        With ``geo`` (sample terms) each node's colour and extinction get the terms at
+        the node's position."""
         mid = 0.5 * (ta + tb)
         half = 0.5 * (tb - ta)
         x = mid[:, None] + half[:, None] * _XK
@@ -426,6 +429,11 @@ class _Classified:
         ds = s - self.anchor[m][:, None]
         alpha = np.clip(self.a0[m][:, None] + self.a1[m][:, None] * ds, 0.0, _ALPHA_MAX)
         tau = -np.log1p(-alpha) * self.inv_u
+        factor = offset = None
+        if geo is not None:
+            points = geo["base"][:, None, :] + x[..., None] * geo["hd"][:, None, :]
+            factor, offset, scale = self.lighting(points, geo["dir"][:, None, :])
+            tau = tau * scale
         hw = h * half                             # half-length of the part in t
         Tk = np.exp(-hw[:, None] * (tau @ _SK.T))   # transmittance from the part's start
         tg = tau[:, _GI]
@@ -435,22 +443,19 @@ class _Classified:
         ODk = hw * (tau @ _WK)
         gk = tau * Tk
         gg = tg * Tg
-        # colour is linear in ds on the part: two weighted sums serve all channels; lit,
-        # it is c(s) * diffuse + specular, with both terms from the gradient at the node
+        # colour is linear in ds on the part: two weighted sums serve all channels; with
+        # sample terms it is c(s) * factor + offset, both from the node's position
         G0k, G0g = hw * (gk @ _WK), hw * (gg @ _WG)
-        diffuse = specular = None
-        if geo is not None:
-            points = geo["base"][:, None, :] + x[..., None] * geo["hd"][:, None, :]
-            diffuse, specular = self.lighting(points, geo["dir"][:, None, :])
-            gk, gg = gk * diffuse, gg * diffuse[:, _GI]
+        if factor is not None:
+            gk, gg = gk * factor, gg * factor[:, _GI]
         D0k, D1k = hw * (gk @ _WK), hw * ((ds * gk) @ _WK)
         D0g, D1g = hw * (gg @ _WG), hw * ((ds[:, _GI] * gg) @ _WG)
         c0, c1 = self.c0[m], self.c1[m]
         Ck = c0 * D0k[:, None] + c1 * D1k[:, None] - cend * G0k[:, None]
         Cg = c0 * D0g[:, None] + c1 * D1g[:, None] - cend * G0g[:, None]
-        if specular is not None:
-            Ck += (hw * ((tau * Tk * specular) @ _WK))[:, None]
-            Cg += (hw * ((tg * Tg * specular[:, _GI]) @ _WG))[:, None]
+        if offset is not None:
+            Ck += hw[:, None] * np.einsum("pn,pnc,n->pc", tau * Tk, offset, _WK)
+            Cg += hw[:, None] * np.einsum("pn,pnc,n->pc", tg * Tg, offset[:, _GI], _WG)
         err = np.maximum(np.abs(ODk - hw * (tg @ _WG)), np.abs(Ck - Cg).max(axis=1))
         # with c = 1 the colour integral is 1 - exp(-OD) exactly: a transmittance that
         # falls too fast for the nodes (both rules missing it) shows up here
@@ -473,10 +478,12 @@ class _Exact(_Classified):
         self.spacing = vol.spacing
         self.valid = None if vol.cell_valid is None else vol.cell_valid.ravel()
         super().__init__(scene.tf, scene.optical_model)
-        if scene.shading and scene.mode == "composite":
-            epsilon, lights = gradient_epsilon(vol), scene_lights(scene)
-            self.lighting = lambda points, dirs: phong_terms(gradient(vol, self.values, points), dirs,
-                                                              scene.phong, epsilon, lights)
+        terms = sample_terms(scene, self.values)
+        if terms is not None:
+            self.lighting = terms.at
+            for name in ("boundary", "silhouette"):
+                if name in scene.illustration:
+                    self.scale_floor *= min(scene.illustration[name][0], 1.0)
 
     # -- traversal ------------------------------------------------------------
     def pieces(self, o, d, tcur, t1, M):
@@ -586,18 +593,38 @@ class _Exact(_Classified):
                 active[a] = ~(done | (tend >= t1[a]))
 
     # -- simple modes ------------------------------------------------------------
-    def extreme(self, o, d, t0, t1, sign):
+    def extreme(self, o, d, t0, t1, sign, where=False):
+        """The largest (sign 1) or smallest (-1) value on each ray; with ``where``, also
+        the ray distance where it is first reached."""
         best = np.full(len(t0), -np.inf)
+        t_best = np.full(len(t0), np.nan)
+
+        def first_top(v):
+            """Index of the first entry within rounding (8 ulp) of each row's largest: the
+            first place a tie is reached, whatever the last bits of the evaluation."""
+            top = v.max(axis=1)
+            slack = np.where(np.isfinite(top), 8 * np.finfo(float).eps * np.abs(top), 0.0)
+            return np.argmax(v >= (top - slack)[:, None], axis=1)
 
         def step(a, P):
-            _, PE = _monotone_split(P["coef"], P["fa"], P["fb"])
+            E, PE = _monotone_split(P["coef"], P["fa"], P["fb"])
             m = np.full((len(a), _WINDOW["other"]), -np.inf)
-            m[P["rows"], P["cols"]] = (sign * PE).max(axis=1)
-            best[a] = np.maximum(best[a], m.max(axis=1))
+            k = first_top(sign * PE)                    # the piece's first extreme
+            top = (sign * PE)[np.arange(len(k)), k]
+            m[P["rows"], P["cols"]] = top
+            tm = np.full((len(a), _WINDOW["other"]), np.nan)
+            tm[P["rows"], P["cols"]] = P["tm"] + P["h"] * E[np.arange(len(k)), k]
+            col = first_top(m)                          # pieces are in ray order: the first
+            window_best = m[np.arange(len(a)), col]
+            slack = np.where(np.isfinite(best[a]), 8 * np.finfo(float).eps * np.abs(best[a]), 0.0)
+            higher = window_best > best[a] + slack
+            best[a[higher]] = window_best[higher]
+            t_best[a[higher]] = tm[np.flatnonzero(higher), col[higher]]
             return np.zeros(len(a), bool)
 
         self.march(o, d, t0, t1, _WINDOW["other"], step)
-        return np.where(np.isfinite(best), sign * best, np.nan)
+        value = np.where(np.isfinite(best), sign * best, np.nan)
+        return (value, t_best) if where else value
 
     def average(self, o, d, t0, t1):
         integral = np.zeros(len(t0))
@@ -800,6 +827,24 @@ def _classify(tf, s):
     return out
 
 
+def _sabella(scene, ex, o, d, t0, t1):
+    """Sabella's pixels: the intensity from composite with the colour left out (the
+    integrator holds the model's colour at 0, as for absorption only), the peak value and
+    its first position from the max search."""
+    from .common import sabella_color
+    from .shading import depth_range
+    intensity = ex.composite(o, d, t0, t1)[:, 3]
+    peak, t_peak = ex.extreme(o, d, t0, t1, 1.0, where=True)
+    out = np.zeros((len(t0), 4))
+    ok = ~np.isnan(peak) & (intensity > 0)
+    if ok.any():
+        cam = scene.camera
+        near, far = depth_range(scene)
+        depth = ((o[ok] + t_peak[ok, None] * d[ok] - cam.eye) @ cam.forward - near) / (far - near)
+        out[ok] = sabella_color(scene.tf.color(peak[ok]), intensity[ok], depth)
+    return out
+
+
 def _render(scene):
     if scene.is_mesh:
         return _render_mesh(scene)
@@ -816,7 +861,9 @@ def _render(scene):
         r = hit[c0:c0 + _CHUNK]
         args = (o[r], d[r], t0[r], t1[r])
         mode = scene.mode
-        if mode == "composite":
+        if mode == "composite" and scene.optical_model == "sabella":
+            out[r] = _sabella(scene, ex, *args)
+        elif mode == "composite":
             out[r] = ex.composite(*args)
         elif mode in ("mip", "minip"):
             out[r] = _classify(scene.tf, ex.extreme(*args, 1.0 if mode == "mip" else -1.0))
@@ -890,9 +937,11 @@ def exact(scene, cache=True, cache_dir=None) -> np.ndarray:
     reads nor writes it."""
     if not isinstance(scene, Scene):
         raise TypeError(f"scene must be a dvr_gl.Scene, got {type(scene).__name__}")
-    if scene.is_mesh and scene.shading:
-        raise ValueError("shading=True is defined for grids (contract section 6: central differences "
-                         "one spacing apart); a TetMesh scene must be unlit")
+    if scene.is_mesh and scene.optical_model == "sabella":
+        raise ValueError("optical_model='sabella' is defined here for grids (the peak of the trilinear field)")
+    if scene.is_mesh and (scene.shading or scene.illustration):
+        raise ValueError("shading=True and illustration terms are defined for grids (contract section 6: "
+                         "central differences one spacing apart); a TetMesh scene must be unlit")
     path = None
     if cache:
         directory = _cache_dir(cache_dir)

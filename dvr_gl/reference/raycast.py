@@ -9,9 +9,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from .common import (box_rays, cell_is_valid, classified_segment, classifier, trilinear,
+from .common import (box_rays, cell_is_valid, classified_segment, classifier, sabella_color, trilinear,
                      world_to_index)
-from .shading import gradient, gradient_epsilon, scene_lights, shade_blinn_phong, shade_segment
+from .shading import (RayLighting, depth_range, gradient, gradient_epsilon, sample_terms, scene_lights,
+                      shade_blinn_phong)
 
 ISO_BISECTION_STEPS = 16  # as ISO_BISECTION_STEPS in shaders/common/isosurface.glsl
 
@@ -67,16 +68,15 @@ def render_plan(plan, lut_exact=False):
 
     m = len(hit)
     mode = scene.mode
-    lit = scene.shading and mode == "composite"
+    terms = sample_terms(scene, values)       # lighting and illustration of composite samples
+    sabella = mode == "composite" and scene.optical_model == "sabella"
+    t_peak = np.zeros(m)
     epsilon = gradient_epsilon(volume)
     lights = scene_lights(scene)
 
-    def gradient_at(t, rows):
-        return gradient(volume, values, o[rows] + t[:, None] * d[rows] + lo)
-
     color = np.zeros((m, 3))
     alpha_acc = np.zeros(m)
-    s_best = np.full(m, -np.inf if mode == "mip" else np.inf)
+    s_best = np.full(m, -np.inf if mode == "mip" or sabella else np.inf)
     s_sum = np.zeros(m)
     len_sum = np.zeros(m)
     alive = np.ones(m, bool)
@@ -109,10 +109,8 @@ def render_plan(plan, lut_exact=False):
             s_front[start] = sample(a[~have_front[rows]], start)
             s_back = sample(b, rows)
             segment = plan.preint.segment(s_front[rows], s_back, length)
-            if lit:
-                on = segment[:, 3] > 0
-                segment[on] = shade_segment(segment[on], gradient_at(tm[on], rows[on]), d[rows[on]],
-                                            scene.phong, epsilon, lights)
+            if terms is not None:
+                segment = RayLighting(terms, o[rows], d[rows]).segments(segment, tm)
             s_front[rows] = s_back
             have_front[rows] = True
             transmittance = 1 - alpha_acc[rows]  # the over operator on an associated segment
@@ -126,13 +124,18 @@ def render_plan(plan, lut_exact=False):
         s = sample(tm, rows)
         if mode == "composite":
             light = None
-            if lit:
-                light = lambda rgb: shade_blinn_phong(rgb, gradient_at(tm, rows), d[rows],   # noqa: E731
-                                                      scene.phong, epsilon, lights)
-            piece = classified_segment(classify, transparency, s, length * inv_unit, scene.optical_model, light)
+            if terms is not None:
+                light = RayLighting(terms, o[rows], d[rows])
+            piece = classified_segment(classify, transparency, s, length * inv_unit, scene.optical_model,
+                                       None if light is None else (lambda rgb: light.samples(rgb, tm)))
             transmittance = 1 - alpha_acc[rows]
             color[rows] += transmittance[:, None] * piece[:, :3]
             alpha_acc[rows] += transmittance * piece[:, 3]
+            if sabella:   # the peak over every sample (the first one met on ties); no early end
+                higher = s > s_best[rows]
+                s_best[rows[higher]] = s[higher]
+                t_peak[rows[higher]] = tm[higher]
+                continue
             stop = alpha_acc[rows] >= 1
             if plan.ert_transmittance > 0:
                 stop |= 1 - alpha_acc[rows] < plan.ert_transmittance
@@ -160,7 +163,14 @@ def render_plan(plan, lut_exact=False):
             t_prev[rows[~crossed]] = tm[~crossed]
 
     result = np.zeros((m, 4))
-    if mode == "composite":
+    if sabella:
+        ok = np.isfinite(s_best) & (alpha_acc > 0)
+        cam = scene.camera
+        near, far = depth_range(scene)
+        depth = ((o + t_peak[:, None] * d + lo - cam.eye) @ cam.forward - near) / (far - near)
+        peak = classify(np.where(ok, s_best, 0.0))[:, :3]
+        result[ok] = sabella_color(peak[ok], alpha_acc[ok], depth[ok])
+    elif mode == "composite":
         result[:, :3] = color
         result[:, 3] = alpha_acc
     elif mode in ("mip", "minip", "average"):

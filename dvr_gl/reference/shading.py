@@ -107,35 +107,117 @@ def gradient_epsilon(volume):
     return 1e-6 * scale / volume.min_spacing
 
 
-class RayLighting:
-    """The lighting of a lit composite scene along some rays ``origins + t * dirs``
-    (box-relative, one per row): ``colors(rgb, t)`` lights straight colours of samples at
-    ray distances ``t`` (GLSL ``litColor``), ``segments(seg, t)`` lights premultiplied
-    (pre-integrated) segments there (GLSL ``shadeSegment``)."""
+def gradient_max(volume, values):
+    """The largest |g| anywhere in the box: the gradient interpolates the samples'
+    gradients, and a norm of a convex combination is at most the largest norm."""
+    return float(np.linalg.norm(sample_gradients(volume, values), axis=-1).max())
 
-    def __init__(self, scene, values, origins, dirs):
-        self.scene, self.values, self.origins, self.dirs = scene, values, origins, dirs
-        self.lo, _ = scene.volume.bounds
+
+def depth_range(scene):
+    """Nearest and farthest depth (along the view direction, from the eye) of the box,
+    the nearest at least 0: where depth cueing runs from 1 to 1 - strength."""
+    cam = scene.camera
+    lo, hi = scene.volume.bounds
+    corners = np.array([[x, y, z] for z in (lo[2], hi[2]) for y in (lo[1], hi[1]) for x in (lo[0], hi[0])])
+    depth = (corners - cam.eye) @ cam.forward
+    near = max(float(depth.min()), 0.0)
+    return near, max(float(depth.max()), near + 1e-30)
+
+
+class SampleTerms:
+    """Everything a composite sample's position changes (GLSL ``sampleTerms`` in
+    shaders/common/shading.glsl): the lights' diffuse factor and specular term (when
+    lit), the illustration terms' tone (an added colour) and depth cue (a factor on the
+    colour), and the opacity scale of boundary and silhouette enhancement (a factor on
+    the extinction). ``at(points, dirs)`` gives (factor, offset RGB, opacity scale): the
+    sample's colour becomes ``c * factor + offset``, its extinction ``tau * scale``."""
+
+    def __init__(self, scene, values):
+        self.scene, self.values = scene, values
+        self.volume = scene.volume
+        self.terms = scene.illustration
+        self.lit = scene.shading
         self.epsilon = gradient_epsilon(scene.volume)
         self.lights = scene_lights(scene)
+        first = scene.lights[0]
+        self.tone_light = first.world_direction(scene.camera)
+        self.needs_gradient = self.lit or bool({"boundary", "silhouette", "tone"} & set(self.terms))
+        self.g_max = gradient_max(self.volume, values) if "boundary" in self.terms else 1.0
+        self.depths = depth_range(scene) if "depth_cue" in self.terms else None
 
-    def terms(self, t):
-        g = gradient(self.scene.volume, self.values, self.origins + np.asarray(t)[:, None] * self.dirs + self.lo)
-        return phong_terms(g, self.dirs, self.scene.phong, self.epsilon, self.lights)
+    def at(self, points, dirs):
+        points = np.asarray(points, np.float64)
+        shape = points.shape[:-1]
+        dirs = np.broadcast_to(dirs, points.shape)
+        factor = np.ones(shape)
+        offset = np.zeros(shape + (3,))
+        scale = np.ones(shape)
+        g = gradient(self.volume, self.values, points) if self.needs_gradient else None
+        if g is not None:
+            length = np.linalg.norm(g, axis=-1)
+            ok = length > self.epsilon
+            n = g / np.where(ok, length, 1.0)[..., None]
+        if self.lit:
+            diffuse, specular = phong_terms(g, dirs, self.scene.phong, self.epsilon, self.lights)
+            factor = diffuse
+            offset = np.repeat(specular[..., None], 3, axis=-1)
+        if "tone" in self.terms:
+            warm, cool = (np.asarray(c) for c in self.terms["tone"])
+            light = -dirs if self.tone_light is None else np.broadcast_to(self.tone_light, points.shape)
+            t = np.abs(np.sum(n * light, axis=-1))
+            offset = offset + np.where(ok[..., None], t[..., None] * warm + (1 - t[..., None]) * cool, 0.0)
+        if "boundary" in self.terms:
+            kc, ks, ke = self.terms["boundary"]
+            scale = scale * (kc + ks * (length / self.g_max if self.g_max > 0 else 0 * length) ** ke)
+        if "silhouette" in self.terms:
+            kc, ks, ke = self.terms["silhouette"]
+            facing = np.abs(np.sum(n * dirs, axis=-1))
+            scale = scale * np.where(ok, kc + ks * np.maximum(1 - facing, 0) ** ke, 1.0)
+        if self.depths is not None:
+            near, far = self.depths
+            cam = self.scene.camera
+            u = np.clip(((points - cam.eye) @ cam.forward - near) / (far - near), 0, 1)
+            cue = 1 - self.terms["depth_cue"][0] * u
+            factor = factor * cue
+            offset = offset * cue[..., None]
+        return factor, offset, scale
 
-    def colors(self, rgb, t):
-        diffuse, specular = self.terms(t)
-        return rgb * diffuse[:, None] + specular[:, None]
+
+def sample_terms(scene, values):
+    """The scene's ``SampleTerms``, or None when its composite samples are plain."""
+    if scene.mode != "composite" or not (scene.shading or scene.illustration):
+        return None
+    return SampleTerms(scene, values)
+
+
+class RayLighting:
+    """A scene's ``SampleTerms`` along some rays ``origins + t * dirs`` (box-relative, one
+    per row): ``samples(rgb, t)`` for straight colours of samples at ray distances ``t``
+    (GLSL ``sampleTerms``), ``segments(seg, t)`` for premultiplied (pre-integrated)
+    segments there (GLSL ``shadeSegment``)."""
+
+    def __init__(self, terms, origins, dirs):
+        self.terms, self.origins, self.dirs = terms, origins, dirs
+        self.lo, _ = terms.volume.bounds
+
+    def at(self, t):
+        return self.terms.at(self.origins + np.asarray(t)[:, None] * self.dirs + self.lo, self.dirs)
+
+    def samples(self, rgb, t):
+        """(the straight colours ``rgb`` of samples at ``t`` with the terms applied, their
+        extinction scale)."""
+        factor, offset, scale = self.at(t)
+        return rgb * factor[:, None] + offset, scale
 
     def segments(self, seg, t):
-        diffuse, specular = self.terms(t)
+        factor, offset, _ = self.at(t)
         out = np.array(seg, np.float64, copy=True)
-        out[:, :3] = seg[:, :3] * diffuse[:, None] + (specular * seg[:, 3])[:, None]
+        out[:, :3] = seg[:, :3] * factor[:, None] + offset * seg[:, 3:4]
         return np.where(seg[:, 3:4] > 0, out, seg)
 
 
+
 def ray_lighting(scene, values, origins, dirs):
-    """A ``RayLighting`` for a lit composite scene, None when its samples are unlit."""
-    if not (scene.shading and scene.mode == "composite"):
-        return None
-    return RayLighting(scene, values, origins, dirs)
+    """A ``RayLighting`` for a scene with sample terms, None when its samples are plain."""
+    terms = sample_terms(scene, values)
+    return None if terms is None else RayLighting(terms, origins, dirs)

@@ -23,9 +23,15 @@ def check_scene(scene, technique, modes=None, data="volume"):
     the technique lights samples."""
     if not isinstance(scene, Scene):
         raise TypeError(f"scene must be a dvr_gl.Scene, got {type(scene).__name__}")
+    if scene.illustration and technique not in SHADING_TECHNIQUES:
+        raise ValueError(f"{technique} has no illustration terms yet: they are rendered by "
+                         f"{', '.join(SHADING_TECHNIQUES)}")
     if scene.shading and technique not in SHADING_TECHNIQUES:
         raise ValueError(f"{technique} does not light samples yet: shading=True is rendered by "
                          f"{', '.join(SHADING_TECHNIQUES)}")
+    if scene.optical_model == "sabella" and technique != "raycast":
+        raise ValueError(f"{technique} composites segments in GL's blending, which cannot follow a ray's peak: "
+                         f"optical_model 'sabella' is rendered by raycast")
     if scene.optical_model != "emission_absorption" and technique not in SHADING_TECHNIQUES:
         raise ValueError(f"{technique} renders optical_model 'emission_absorption' only; "
                          f"{scene.optical_model!r} is rendered by {', '.join(SHADING_TECHNIQUES)}")
@@ -97,6 +103,10 @@ def preintegration_table(scene, step, tables):
     if scene.optical_model != "emission_absorption":
         raise ValueError(f"preintegrate tables emission-absorption segments; optical_model "
                          f"{scene.optical_model!r} is sampled at segment midpoints (preintegrate=False)")
+    scaled = [name for name in ("boundary", "silhouette") if name in scene.illustration]
+    if scaled:
+        raise ValueError(f"preintegrate tables the TF's own extinction; {' and '.join(scaled)} enhancement "
+                         f"scales it per sample (preintegrate=False)")
     volume, tf = scene.volume, scene.tf
     return tables.get("preintegration", volume, tf, step,
                       make=lambda v, t, length: build_table(t, v.data_range, length))
@@ -107,19 +117,32 @@ def preintegration_uniforms(table):
     return {"u_pi_lo": table.lo, "u_pi_scale": table.scale, "u_pi_size": table.size}
 
 
+GRADIENT_TERMS = ("boundary", "silhouette", "tone")   # illustration terms that read the gradient
+
+
+def needs_gradient(scene):
+    """Whether a scene's samples read the gradient (lighting, isosurface shading, or an
+    illustration term that does)."""
+    return scene.shaded or any(name in scene.illustration for name in GRADIENT_TERMS)
+
+
 def shading_defines(scene, gradients):
     """The defines of shaders/common/shading.glsl (and the optical model of
-    classification.glsl) a scene needs: none when its composite samples are unlit
-    emission-absorption; ``gradients`` is "on_the_fly" (six field lookups per lit sample)
-    or "texture" (one lookup in a gradient texture made once per volume: the same
-    gradient, see ``reference.shading.sample_gradients``, for three times the volume's
-    memory)."""
+    classification.glsl) a scene needs: none for plain emission-absorption samples.
+    ``gradients`` is "on_the_fly" (six field lookups per sample that needs one) or
+    "texture" (one lookup in a gradient texture made once per volume: the same gradient,
+    see ``reference.shading.sample_gradients``, for three times the volume's memory)."""
     if gradients not in GRADIENTS:
         raise ValueError(f"gradients must be one of {', '.join(GRADIENTS)}, got {gradients!r}")
     defines = {}
-    if scene.shading and scene.mode == "composite":
+    composite = scene.mode == "composite"
+    if composite and (scene.shading or scene.illustration):
+        defines["SAMPLE_TERMS"] = 1
+    if scene.shading and composite:
         defines["SHADING"] = 1
-    if scene.shaded and gradients == "texture":
+    for name in scene.illustration:
+        defines[name.upper()] = 1
+    if needs_gradient(scene) and gradients == "texture":
         defines["GRADIENT_TEXTURE"] = 1
     if scene.shaded and not scene.headlight_only:
         defines["LIGHTS"] = 1
@@ -143,6 +166,28 @@ def gradient_texture(renderer, volume):
     return renderer.resource("gradient", volume, make=make)
 
 
+def illustration_uniforms(renderer, scene):
+    """Uniforms of the illustration terms in shaders/common/shading.glsl."""
+    from ..reference.shading import depth_range, gradient_max
+    terms = scene.illustration
+    out = {}
+    if "tone" in terms:
+        light = scene.lights[0].world_direction(scene.camera)
+        out.update(u_tone_warm=terms["tone"][0], u_tone_cool=terms["tone"][1],
+                   u_tone_light=(0.0, 0.0, 0.0) if light is None else tuple(light))
+    if "depth_cue" in terms:
+        near, far = depth_range(scene)
+        out["u_depth_cue"] = (near, far, terms["depth_cue"][0])
+    if "boundary" in terms:
+        volume = scene.volume
+        out["u_boundary"] = terms["boundary"]
+        out["u_gradient_max"] = renderer.tables.get("gradient_max", volume,
+                                                    make=lambda v: gradient_max(v, v.values(np.float64)))
+    if "silhouette" in terms:
+        out["u_silhouette"] = terms["silhouette"]
+    return out
+
+
 def add_optional_inputs(renderer, plan, textures, uniforms):
     """Add what a plan's optional features read: the pre-integration table, the
     masked-cell texture and the lighting."""
@@ -153,9 +198,10 @@ def add_optional_inputs(renderer, plan, textures, uniforms):
         uniforms.update(preintegration_uniforms(plan.preint))
     if scene.volume.has_nonfinite:
         textures["t_cell_valid"] = renderer.cell_valid_texture(scene.volume)
-    if scene.shaded and not scene.is_mesh:
+    if (scene.shaded or scene.illustration) and not scene.is_mesh:
         uniforms["u_phong"] = scene.phong
         uniforms["u_gradient_epsilon"] = gradient_epsilon(scene.volume)
+        uniforms.update(illustration_uniforms(renderer, scene))
         if plan.defines.get("GRADIENT_TEXTURE"):
             textures["t_gradient"] = gradient_texture(renderer, scene.volume)
         if plan.defines.get("LIGHTS"):

@@ -118,6 +118,7 @@ def make_plan(scene, step=None, *, target="rgba32f", jitter_seed=None, ert_trans
         raise ValueError(f"preintegrate applies to mode 'composite' only, got mode {scene.mode!r}")
 
     composite = scene.mode == "composite"
+    sabella = scene.optical_model == "sabella"   # the peak is over every sample: no skipping, no early end
     lut = tables.get("lut", scene.tf, make=LookupTable)
     jitter = None
     if jitter_seed is not None:
@@ -126,7 +127,7 @@ def make_plan(scene, step=None, *, target="rgba32f", jitter_seed=None, ert_trans
     if preintegrate:
         preint = preintegration_table(scene, step, tables)
     occupancy = None
-    if skip_empty and composite and preint is None:
+    if skip_empty and composite and preint is None and not sabella:
         # once per volume and once per (volume, TF) respectively, never per frame
         ranges = tables.get("brick_ranges", scene.volume, make=brick_value_ranges)
         occupancy = tables.get("occupancy", scene.volume, scene.tf,
@@ -138,7 +139,7 @@ def make_plan(scene, step=None, *, target="rgba32f", jitter_seed=None, ert_trans
         defines["JITTER"] = 1
     if occupancy is not None:
         defines["SKIP_EMPTY"] = 1
-    ert = float(ert_transmittance) if composite else 0.0
+    ert = float(ert_transmittance) if composite and not sabella else 0.0
     if ert > 0:
         defines["EARLY_RAY_TERMINATION"] = 1
     if scene.volume.has_nonfinite:
@@ -249,6 +250,9 @@ def draw(renderer, plan):
         uniforms["u_ert_transmittance"] = plan.ert_transmittance
     if scene.mode == "isosurface":
         uniforms["u_iso"] = scene.iso_value
+    if scene.optical_model == "sabella":
+        from ..reference.shading import depth_range
+        uniforms["u_depth_range"] = depth_range(scene)
     bind(prog, textures, uniforms)
 
     kind, view_proj = box_proxy(scene, grow_pixels=grow_pixels(renderer.ctx))

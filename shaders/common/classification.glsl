@@ -31,12 +31,9 @@ float transparencyTF(float s) {
 }
 
 #ifndef OPTICAL_MODEL
-#define OPTICAL_MODEL 0   // 0 emission-absorption, 1 absorption only, 2 emission only
-#endif
-#ifndef SHADING
-#define SHADING 0
-#endif
-
+#define OPTICAL_MODEL 0   // 0 emission-absorption, 1 absorption only, 2 emission only,
+#endif                      // 3 Sabella (its segments as absorption only; the ray caster
+                            // colours the ray at its end, common/sabella.glsl)
 // The segment length_over_unit unit distances long of a sample whose straight colour and
 // unit-distance opacity are rgba (its value s, for the precise transparency), as
 // premultiplied RGBA under the scene's optical model (NumPy twin:
@@ -50,7 +47,7 @@ vec4 segmentOf(vec4 rgba, float s, float length_over_unit) {
     return vec4(rgba.rgb * (-log_transparency * max(length_over_unit, 0.0)), 0.0);
 #else
     float alpha = correctOpacity(rgba.a, transparency, length_over_unit);
-  #if OPTICAL_MODEL == 1
+  #if OPTICAL_MODEL == 1 || OPTICAL_MODEL == 3
     return vec4(0.0, 0.0, 0.0, alpha);
   #else
     return vec4(rgba.rgb * alpha, alpha);
@@ -64,17 +61,22 @@ vec4 classifiedSegment(float s, float length_over_unit) {
     return segmentOf(applyTF(s), s, length_over_unit);
 }
 
-#if SHADING
-vec3 litColor(vec3 color, vec3 p_world, vec3 ray_dir);   // shaders/common/shading.glsl
+#ifndef SAMPLE_TERMS
+#define SAMPLE_TERMS 0   // lighting or illustration terms: shaders/common/shading.glsl
+#endif
+#if SAMPLE_TERMS
+vec3 sampleTerms(vec3 color, vec3 p_world, vec3 ray_dir, out float opacity_scale);
 #endif
 
-// The same for a sample taken at p on a ray along ray_dir: lit there (when the scene is)
-// before it is associated with its opacity.
+// The same for a sample taken at p on a ray along ray_dir: its colour lit (and its
+// extinction scaled) there, when the scene asks, before it is associated.
 vec4 sampleSegment(float s, float length_over_unit, vec3 p_world, vec3 ray_dir) {
     vec4 rgba = applyTF(s);
     if (rgba.a <= 0.0) return vec4(0.0);
-#if SHADING
-    rgba.rgb = litColor(rgba.rgb, p_world, ray_dir);
+#if SAMPLE_TERMS
+    float opacity_scale;
+    rgba.rgb = sampleTerms(rgba.rgb, p_world, ray_dir, opacity_scale);
+    length_over_unit *= opacity_scale;
 #endif
     return segmentOf(rgba, s, length_over_unit);
 }

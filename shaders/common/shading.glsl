@@ -83,15 +83,101 @@ vec3 shadeBlinnPhong(vec3 color, vec3 grad, vec3 ray_dir) {
     return color * k.x + k.y;
 }
 
-// A straight colour lit at a sample point (declared in common/classification.glsl).
-vec3 litColor(vec3 color, vec3 p_world, vec3 ray_dir) {
-    return shadeBlinnPhong(color, gradient(p_world), ray_dir);
+// The terms a composite sample's position changes (NumPy twin:
+// reference.shading.SampleTerms): the lights (SHADING), and the illustration terms of
+// Ebert and Rheingans (2000): tone (an added warm-to-cool colour), depth cue (a factor
+// on the colour), boundary and silhouette enhancement (factors on the extinction).
+#ifndef SHADING
+#define SHADING 0
+#endif
+#ifndef TONE
+#define TONE 0
+#endif
+#ifndef DEPTH_CUE
+#define DEPTH_CUE 0
+#endif
+#ifndef BOUNDARY
+#define BOUNDARY 0
+#endif
+#ifndef SILHOUETTE
+#define SILHOUETTE 0
+#endif
+#define NEEDS_GRADIENT (SHADING || TONE || BOUNDARY || SILHOUETTE)
+
+#if TONE
+uniform vec3 u_tone_warm;
+uniform vec3 u_tone_cool;
+uniform vec3 u_tone_light;   // towards the first light (world); 0: the headlight
+#endif
+#if DEPTH_CUE
+#include "common/camera_ray.glsl"
+uniform vec3 u_depth_cue;    // nearest and farthest depth of the box, strength
+#endif
+#if BOUNDARY
+uniform vec3 u_boundary;     // k_gc, k_gs, k_ge
+uniform float u_gradient_max;
+#endif
+#if SILHOUETTE
+uniform vec3 u_silhouette;   // k_sc, k_ss, k_se
+#endif
+
+// The terms at a sample: its colour becomes color * factor + offset, its extinction is
+// multiplied by opacity_scale.
+void termsAt(vec3 p_world, vec3 ray_dir, out float factor, out vec3 offset, out float opacity_scale) {
+    factor = 1.0;
+    offset = vec3(0.0);
+    opacity_scale = 1.0;
+#if NEEDS_GRADIENT
+    vec3 g = gradient(p_world);
+    float len = length(g);
+    bool oriented = len > u_gradient_epsilon;
+    vec3 n = oriented ? g / len : vec3(0.0);
+#endif
+#if SHADING
+    vec2 k = phongTerms(g, ray_dir);
+    factor = k.x;
+    offset = vec3(k.y);
+#endif
+#if TONE
+    if (oriented) {
+        vec3 l = u_tone_light == vec3(0.0) ? -ray_dir : u_tone_light;
+        float t = abs(dot(n, l));
+        offset += t * u_tone_warm + (1.0 - t) * u_tone_cool;
+    }
+#endif
+#if BOUNDARY
+    opacity_scale *= u_boundary.x + u_boundary.y * pow(u_gradient_max > 0.0 ? len / u_gradient_max : 0.0,
+                                                        u_boundary.z);
+#endif
+#if SILHOUETTE
+    if (oriented) {
+        opacity_scale *= u_silhouette.x + u_silhouette.y * pow(max(1.0 - abs(dot(n, ray_dir)), 0.0),
+                                                                u_silhouette.z);
+    }
+#endif
+#if DEPTH_CUE
+    float u = clamp((dot(p_world - u_eye, u_forward) - u_depth_cue.x) / (u_depth_cue.y - u_depth_cue.x), 0.0, 1.0);
+    float cue = 1.0 - u_depth_cue.z * u;
+    factor *= cue;
+    offset *= cue;
+#endif
 }
 
-// A premultiplied segment (c * alpha, alpha) lit: the lit colour, associated with alpha.
-vec4 shadeSegment(vec4 segment, vec3 grad, vec3 ray_dir) {
-    vec2 k = phongTerms(grad, ray_dir);
-    return vec4(segment.rgb * k.x + k.y * segment.a, segment.a);
+// A sample's straight colour with its terms (declared in common/classification.glsl).
+vec3 sampleTerms(vec3 color, vec3 p_world, vec3 ray_dir, out float opacity_scale) {
+    float factor;
+    vec3 offset;
+    termsAt(p_world, ray_dir, factor, offset, opacity_scale);
+    return color * factor + offset;
+}
+
+// A premultiplied (pre-integrated) segment (c * alpha, alpha) with the colour terms of a
+// sample at p: (c * factor + offset) associated with alpha.
+vec4 termsSegment(vec4 segment, vec3 p_world, vec3 ray_dir) {
+    float factor, unused;
+    vec3 offset;
+    termsAt(p_world, ray_dir, factor, offset, unused);
+    return vec4(segment.rgb * factor + offset * segment.a, segment.a);
 }
 
 #endif

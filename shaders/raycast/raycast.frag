@@ -36,6 +36,9 @@
 #ifndef SHADING
 #define SHADING 0
 #endif
+#ifndef SAMPLE_TERMS
+#define SAMPLE_TERMS 0
+#endif
 
 #include "common/camera_ray.glsl"
 #include "common/ray_box.glsl"
@@ -45,11 +48,19 @@
 #if PREINTEGRATE
 #include "common/preintegration.glsl"
 #endif
-#if MODE_ISOSURFACE || SHADING
+#if MODE_ISOSURFACE || SAMPLE_TERMS
 #include "common/shading.glsl"
 #endif
 #if MODE_ISOSURFACE
 #include "common/isosurface.glsl"
+#endif
+#ifndef OPTICAL_MODEL
+#define OPTICAL_MODEL 0
+#endif
+#define SABELLA (MODE_COMPOSITE && OPTICAL_MODEL == 3)
+#if SABELLA
+#include "common/sabella.glsl"
+uniform vec2 u_depth_range;   // nearest and farthest depth of the box
 #endif
 
 uniform vec3 u_extent;        // box size; the box is [0, u_extent]
@@ -90,6 +101,10 @@ void main() {
 #if MODE_COMPOSITE
     vec3 color = vec3(0.0);
     float alpha_acc = 0.0;
+  #if SABELLA
+    float s_peak = -1.0 / 0.0;  // the ray's largest sample and where it is first met
+    float t_peak = 0.0;
+  #endif
   #if PREINTEGRATE
     float s_front = 0.0;      // the field at the current segment's start
     bool have_front = false;
@@ -132,8 +147,8 @@ void main() {
         if (!have_front) s_front = sampleVolume(origin + a * dir);
         float s_back = sampleVolume(origin + b * dir);
         vec4 segment = preintegratedSegment(s_front, s_back, len);
-  #if SHADING
-        if (segment.a > 0.0) segment = shadeSegment(segment, gradient(p), dir);
+  #if SAMPLE_TERMS
+        if (segment.a > 0.0) segment = termsSegment(segment, p, dir);
   #endif
         s_front = s_back;
         have_front = true;
@@ -147,6 +162,12 @@ void main() {
 #endif
         float s = sampleVolume(p);
 #if MODE_COMPOSITE
+  #if SABELLA
+        if (s > s_peak) {
+            s_peak = s;
+            t_peak = tm;
+        }
+  #endif
         vec4 rgba = applyTF(s);
         if (rgba.a <= 0.0) {
             // Nothing to composite. Only now look at the brick: occupied regions never
@@ -168,16 +189,19 @@ void main() {
   #endif
             continue;
         }
-  #if SHADING
-        rgba.rgb = litColor(rgba.rgb, p, dir);
+        float scale = 1.0;
+  #if SAMPLE_TERMS
+        rgba.rgb = sampleTerms(rgba.rgb, p, dir, scale);
   #endif
-        vec4 piece = segmentOf(rgba, s, len * u_inv_unit);
+        vec4 piece = segmentOf(rgba, s, len * u_inv_unit * scale);
         color += (1.0 - alpha_acc) * piece.rgb;
         alpha_acc += (1.0 - alpha_acc) * piece.a;
   #if EARLY_RAY_TERMINATION
         if (1.0 - alpha_acc < u_ert_transmittance) break;
   #endif
+  #if !SABELLA
         if (alpha_acc >= 1.0) break;
+  #endif
 #elif MODE_MIP
         s_best = max(s_best, s);
 #elif MODE_MINIP
@@ -202,7 +226,13 @@ void main() {
 #endif
     }
 
-#if MODE_COMPOSITE
+#if SABELLA
+    if (!isinf(s_peak) && alpha_acc > 0.0) {
+        float depth = (dot(origin + t_peak * dir - u_eye, u_forward) - u_depth_range.x)
+                      / (u_depth_range.y - u_depth_range.x);
+        f_color = sabellaColor(applyTF(s_peak).rgb, alpha_acc, depth);
+    }
+#elif MODE_COMPOSITE
     f_color = vec4(color, alpha_acc);
 #elif MODE_MIP || MODE_MINIP
     if (!isinf(s_best)) {

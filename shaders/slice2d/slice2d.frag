@@ -12,8 +12,8 @@
 #ifndef GAP
 #define GAP 0
 #endif
-#ifndef SHADING
-#define SHADING 0
+#ifndef SAMPLE_TERMS
+#define SAMPLE_TERMS 0
 #endif
 
 #include "common/camera_ray.glsl"
@@ -78,16 +78,16 @@ float sampleBetween(vec3 p) {
     return s * (1.0 - f) + texture(t_stack, vec3(uv, layer + 1.0)).r * f;
 }
 
-#if SHADING
+#if SAMPLE_TERMS
 // Gradients from the stack: sampleBetween is the trilinear field itself.
 #define FIELD_AT sampleBetween
 #include "common/shading.glsl"
 #endif
 
-// A pre-integrated segment lit with the gradient at p (unchanged without shading).
+// A pre-integrated segment with the colour terms at p (unchanged without them).
 vec4 lit(vec4 segment, vec3 p, vec3 dir) {
-#if SHADING
-    if (segment.a > 0.0) return shadeSegment(segment, gradient(p), dir);
+#if SAMPLE_TERMS
+    if (segment.a > 0.0) return termsSegment(segment, p, dir);
 #endif
     return segment;
 }

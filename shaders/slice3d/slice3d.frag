@@ -15,8 +15,8 @@
 #ifndef GAP
 #define GAP 0
 #endif
-#ifndef SHADING
-#define SHADING 0
+#ifndef SAMPLE_TERMS
+#define SAMPLE_TERMS 0
 #endif
 
 #include "common/camera_ray.glsl"
@@ -26,7 +26,7 @@
 #if PREINTEGRATE
 #include "common/preintegration.glsl"
 #endif
-#if SHADING
+#if SAMPLE_TERMS
 #include "common/shading.glsl"
 #endif
 
@@ -71,8 +71,8 @@ vec4 segmentColor(vec3 origin, vec3 dir, float a, float b) {
     if (!insideValidCell(0.5 * (pa + pb))) return vec4(0.0);
 #endif
     vec4 segment = preintegratedSegment(sampleVolume(pa), sampleVolume(pb), b - a);
-#if SHADING
-    if (segment.a > 0.0) segment = shadeSegment(segment, gradient(0.5 * (pa + pb)), dir);
+#if SAMPLE_TERMS
+    if (segment.a > 0.0) segment = termsSegment(segment, 0.5 * (pa + pb), dir);
 #endif
     return segment;
 }
