@@ -169,8 +169,10 @@ def add_render_options(r):
                    help="composite mode: Ebert-Rheingans terms with their default parameters: boundary, "
                         "silhouette (extinction scaled by gradient magnitude / by view angle), tone "
                         "(warm-to-cool colour), depth_cue (darker with depth)")
-    r.add_argument("--shading", action="store_true",
-                   help="light the samples with a Blinn-Phong headlight (composite mode; raycast, slice3d, slice2d)")
+    r.add_argument("--shading", action=argparse.BooleanOptionalAction, default=None,
+                   help="light the samples (Blinn-Phong, the headlight unless --light): on by default "
+                        "where it is defined (raycast, slice3d, slice2d in composite mode with an "
+                        "emitting optical model); --no-shading turns it off")
     r.add_argument("--light", type=_light, action="append", metavar="SPACE:X,Y,Z[:I]",
                    help="with --shading: a directional light towards X,Y,Z in world or view space "
                         "(world:1,1,0, view:-1,1,1:0.5) or headlight[:I]; repeat for up to 4 "
@@ -185,10 +187,12 @@ def add_render_options(r):
     r.add_argument("--iso", type=_number, metavar="V", help="iso-value for --mode isosurface (data units)")
     r.add_argument("--size", type=_size, default=(512, 512), metavar="WxH",
                    help="image size in pixels (default: 512x512)")
-    r.add_argument("--azimuth", type=_number, default=0.0, metavar="DEG",
-                   help="turn the camera about +y (default: 0, looking along -z)")
-    r.add_argument("--elevation", type=_number, default=0.0, metavar="DEG",
-                   help="then raise it about its right axis (default: 0)")
+    r.add_argument("--azimuth", type=_number, default=None, metavar="DEG",
+                   help="turn the camera about the up direction (default: 30). 0 looks along -z with +y "
+                        "up, or, for a file with an anatomical orientation (NIfTI, NRRD), at the face "
+                        "with the head up")
+    r.add_argument("--elevation", type=_number, default=None, metavar="DEG",
+                   help="then raise it towards the up direction (default: 20)")
     r.add_argument("--zoom", type=_positive, default=1.0, metavar="F", help="> 1 moves closer (default: 1)")
     r.add_argument("--fov", type=_positive, default=30.0, metavar="DEG",
                    help="vertical field of view (default: 30)")
@@ -402,7 +406,7 @@ def cmd_info_file(args, out=None):
     data, preset = _load_input(args)
     if mesh:
         arrays = dvr_io.point_arrays(args.input)
-        chosen = _scalars_name(args, arrays)
+        chosen = getattr(data, "scalars_name", None) or args.scalars or "?"
         lo, hi = data.bounds
         listed = ", ".join(name + (f" ({k} components)" if k != 1 else "") + (" *" if name == chosen else "")
                            for name, k in arrays.items())
@@ -450,13 +454,6 @@ def zero_volume_count(mesh):
     edges = p[:, [1, 2, 3, 2, 3, 3]] - p[:, [0, 0, 0, 1, 1, 2]]
     longest = (edges ** 2).sum(-1).max(axis=1) ** 0.5
     return int((abs(6 * mesh.signed_volumes()) <= 1e-12 * longest ** 3).sum())
-
-
-def _scalars_name(args, arrays):
-    """The name of the point array a mesh INPUT is rendered with."""
-    if getattr(args, "scalars", None) is not None:
-        return args.scalars
-    return next((name for name, k in arrays.items() if k == 1), "?")
 
 
 def _reason(exc):
@@ -508,7 +505,8 @@ def _describe_tf(name, tf):
 
 def cmd_render(args, out=None):
     out = out or sys.stdout
-    from .scene import Scene, default_camera
+    from .inputs import FIRST_AZIMUTH, FIRST_ELEVATION, first_camera, shading_for
+    from .scene import Scene
 
     _check_out(args.out)
     _check_technique(args.technique)
@@ -531,6 +529,8 @@ def cmd_render(args, out=None):
         if args.preintegrate:
             raise UsageError("--optical-model", f"{args.optical_model} is sampled at segment midpoints; "
                                                 "leave out --preintegrate")
+    if args.shading is None:   # lit by default where lighting is defined
+        args.shading = shading_for(args.technique, mode, args.optical_model or "emission_absorption")
     if args.light and not (args.shading or mode == "isosurface"):
         raise UsageError("--light", "is only used with --shading (or --mode isosurface)")
     if args.light and len(args.light) > 4:
@@ -546,8 +546,8 @@ def cmd_render(args, out=None):
     t0 = time.perf_counter()
     volume, default_preset = _load_input(args)
     tf_name, tf = _resolve_tf(args.tf, volume, default_preset)
-    camera = default_camera(volume, azimuth=args.azimuth, elevation=args.elevation, zoom=args.zoom,
-                            fov=args.fov, ortho=args.ortho)
+    camera = first_camera(volume, azimuth=args.azimuth, elevation=args.elevation, zoom=args.zoom,
+                          fov=args.fov, ortho=args.ortho)
     width, height = args.size
     optical = {"optical_model": args.optical_model} if args.optical_model else {}
     if args.illustration:
@@ -582,7 +582,10 @@ def cmd_render(args, out=None):
     dvr_io.save_png(args.out, image, background=args.background)
 
     lo, hi = volume.data_range
-    view = f"azimuth {args.azimuth:g}, elevation {args.elevation:g}, zoom {args.zoom:g}"
+    azimuth = FIRST_AZIMUTH if args.azimuth is None else args.azimuth
+    elevation = FIRST_ELEVATION if args.elevation is None else args.elevation
+    frame = "from the front, head up" if getattr(volume, "orientation", None) else "from +z, +y up"
+    view = f"{frame}, azimuth {azimuth:g}, elevation {elevation:g}, zoom {args.zoom:g}"
     view += ", orthographic" if args.ortho else f", fov {args.fov:g}"
     if args.technique in MESH_TECHNIQUES:
         step = f"sort {render_kwargs.get('sort', 'mpvo')}"
@@ -592,7 +595,7 @@ def cmd_render(args, out=None):
               if k not in ("technique", "step", "sort")]
     step += "".join(", " + e for e in extras)
     if scene.is_mesh:
-        name = _scalars_name(args, dvr_io.point_arrays(args.input))
+        name = getattr(volume, "scalars_name", None) or args.scalars or "?"
         print(f"mesh       {args.input}: {volume.n_points} points, {volume.n_tets} tets, "
               f"scalars {name} {lo:g}..{hi:g}", file=out)
     else:
@@ -602,6 +605,7 @@ def cmd_render(args, out=None):
               f"values {lo:g}..{hi:g}", file=out)
     print(f"transfer   {_describe_tf(tf_name, tf)}", file=out)
     print(f"rendered   {args.technique}, mode {mode}" + (f" {args.iso:g}" if mode == "isosurface" else "")
+          + (", lit" if scene.shading else "")
           + f", {step}, {width}x{height}, {view}, backend {backend}", file=out)
     print(f"time       load {t_load:.3f} s, GL context {t2 - t1:.3f} s, first frame {t3 - t2:.3f} s "
           "(includes shader compile and upload)", file=out)

@@ -31,6 +31,15 @@ def _data():
 #: transfer-function presets: name -> function(data) -> TransferFunction.
 PRESETS = {
     "auto": lambda data: _transfer().auto_preset(data),
+    "ct": lambda data: _transfer().ct_preset(data, "ct"),
+    "ct_bone": lambda data: _transfer().ct_preset(data, "ct_bone"),
+    "ct_lung": lambda data: _transfer().ct_preset(data, "ct_lung"),
+    "mr": lambda data: _transfer().mr_preset(data),
+    "warm": lambda data: _transfer().ramp_preset(data, _transfer().RAMPS["warm"]),
+    "coolwarm": lambda data: _transfer().ramp_preset(data, _transfer().RAMPS["coolwarm"]),
+    "grey": lambda data: _transfer().ramp_preset(data, _transfer().RAMPS["grey"]),
+    **{name: (lambda data, name=name: _transfer().colormap_preset(data, name))
+       for name in ("viridis", "magma", "inferno", "plasma", "cividis", "gray", "bone")},
     "ct_head": lambda data: _data().ct_head_tf(),
     "synthetic": lambda data: _data().synthetic_tf(),
 }
@@ -40,6 +49,22 @@ BUILTINS = {
     "ct_head": (lambda: _data().ct_head(), "ct_head"),
     "synthetic": (lambda: _data().synthetic(), "synthetic"),
 }
+
+
+def suitable_presets(data):
+    """The preset names that suit ``data``: auto first, the CT ones for Hounsfield units,
+    mr for an anatomically oriented volume, then the generic ramps and colormaps."""
+    transfer = _transfer()
+    names = ["auto"]
+    if transfer.looks_like_hu(data):
+        names += ["ct", "ct_bone", "ct_lung"]
+    if getattr(data, "orientation", None) is not None:
+        names.append("mr")
+    names += ["warm", "coolwarm", "grey"]
+    import importlib.util
+    if importlib.util.find_spec("matplotlib") is not None:   # the colormap presets need it
+        names += ["viridis", "magma"]
+    return names
 
 
 def is_mesh_input(source, shape=None, dtype=None):
@@ -100,8 +125,13 @@ def resolve_tf(spec, data, default="auto"):
     if spec is None:
         return default, PRESETS[default](data)
     key = str(spec).replace("-", "_")
-    if key in PRESETS:  # a file that happens to have a preset's name: pass it as ./NAME
-        return key, PRESETS[key](data)
+    try:
+        if key in PRESETS:  # a file that happens to have a preset's name: pass it as ./NAME
+            return key, PRESETS[key](data)
+        if key.startswith("cmap:"):
+            return key, _transfer().colormap_preset(data, str(spec)[5:])
+    except ValueError as e:
+        raise InputError("tf", str(e)) from None
     if os.path.isfile(spec):
         try:
             return spec, load_tf_json(spec)
@@ -111,7 +141,37 @@ def resolve_tf(spec, data, default="auto"):
             raise InputError("tf", f"cannot read {spec!r}: {e}") from None
     if str(spec).lower().endswith(".json"):
         raise InputError("tf", f"no such file {spec!r}")
-    raise InputError("tf", f"{spec!r} is neither a preset ({', '.join(PRESETS)}) nor a file")
+    raise InputError("tf", f"{spec!r} is neither a preset ({', '.join(PRESETS)}, cmap:NAME for any matplotlib "
+                           f"colormap) nor a file")
+
+
+#: the first view's turn (degrees), as pyvista's default view is oblique: azimuth about
+#: the up direction, then elevation towards it
+FIRST_AZIMUTH, FIRST_ELEVATION = 30.0, 20.0
+
+
+def first_camera(data, azimuth=None, elevation=None, zoom=1.0, fov=30.0, ortho=False):
+    """The camera a front end starts with: ``default_camera`` in the data's own frame
+    (for a volume with an anatomical orientation, the eye in front of the face with the
+    head up; otherwise looking along -z with +y up), turned by ``azimuth`` and
+    ``elevation``, which default to an oblique FIRST_AZIMUTH, FIRST_ELEVATION."""
+    from .scene import anatomical_frame, default_camera
+    frame = anatomical_frame(data)
+    azimuth = FIRST_AZIMUTH if azimuth is None else azimuth
+    elevation = FIRST_ELEVATION if elevation is None else elevation
+    extra = {} if frame is None else {"front": frame[0], "up": frame[1]}
+    return default_camera(data, azimuth=azimuth, elevation=elevation, zoom=zoom, fov=fov, ortho=ortho, **extra)
+
+
+LIGHTING_TECHNIQUES = ("raycast", "slice3d", "slice2d")
+
+
+def shading_for(technique, mode="composite", optical_model="emission_absorption", wanted=True):
+    """Whether a front end lights the scene: what the user wants (by default yes), where
+    it is defined: the techniques that light samples, composite mode, an optical model
+    that emits (isosurfaces are always lit)."""
+    return bool(wanted) and technique in LIGHTING_TECHNIQUES and mode == "composite" \
+        and optical_model in ("emission_absorption", "emission")
 
 
 def parse_light(text):
@@ -134,8 +194,8 @@ def parse_light(text):
 _RENDERERS = {}
 
 
-def render(source, *, tf=None, technique=None, size=(512, 512), azimuth=0.0, elevation=0.0, zoom=1.0, fov=30.0,
-           ortho=False, mode="composite", iso=None, shading=False, lights=None, scalars=None, spacing=None,
+def render(source, *, tf=None, technique=None, size=(512, 512), azimuth=None, elevation=None, zoom=1.0, fov=30.0,
+           ortho=False, mode="composite", iso=None, shading=None, lights=None, scalars=None, spacing=None,
            backend="auto", **options):
     """Render ``source`` (anything :func:`load_input` takes) in one call; returns the
     (height, width, 4) float32 premultiplied RGBA image, row 0 on top.
@@ -146,24 +206,27 @@ def render(source, *, tf=None, technique=None, size=(512, 512), azimuth=0.0, ele
     ``tf``: a preset name, a JSON file or a TransferFunction (default: the data's
     preset). ``technique``: as ``Renderer.render`` (default: raycast for grids, tetra
     for meshes); its own options (``step``, ``sort``, ``repetitions``, ...) pass through
-    ``options``. The camera is ``dvr_gl.default_camera(data, azimuth, elevation, zoom,
-    fov, ortho)``; ``shading=True`` lights composite samples (``lights``: a ``dvr_gl.Light`` or
-    a list of them; the headlight by default). One renderer per backend is kept for the process, so later calls do
-    not compile or upload again."""
+    ``options``. The camera is :func:`first_camera` (an oblique view, in front of the
+    face for an anatomically oriented volume). Composite samples are lit where the
+    technique lights them (:func:`shading_for`) unless ``shading=False``; ``lights``: a
+    ``dvr_gl.Light`` or a list of them (the headlight by default). One renderer per
+    backend is kept for the process, so later calls do not compile or upload again."""
     from .renderer import Renderer
-    from .scene import Scene, default_camera
+    from .scene import Scene
     data, preset = load_input(source, scalars=scalars, spacing=spacing)
     _, tf = resolve_tf(tf, data, preset)
     try:
         width, height = (int(size), int(size)) if np.isscalar(size) else (int(size[0]), int(size[1]))
     except (TypeError, ValueError, IndexError):
         raise InputError("size", f"expected an int or (width, height), got {size!r}") from None
-    scene = Scene(data, tf, default_camera(data, azimuth=azimuth, elevation=elevation, zoom=zoom, fov=fov,
-                                           ortho=ortho),
+    if technique is None:
+        technique = "tetra" if getattr(data, "n_tets", None) is not None else "raycast"
+    if shading is None:
+        shading = shading_for(technique, mode)
+    scene = Scene(data, tf, first_camera(data, azimuth=azimuth, elevation=elevation, zoom=zoom, fov=fov,
+                                         ortho=ortho),
                   width=width, height=height, mode=mode, iso_value=iso, shading=shading,
                   **({} if lights is None else {"lights": lights}))
-    if technique is None:
-        technique = "tetra" if scene.is_mesh else "raycast"
     renderer = _RENDERERS.get(backend)
     if renderer is None:
         renderer = _RENDERERS[backend] = Renderer(backend=backend)

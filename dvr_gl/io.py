@@ -51,7 +51,8 @@ a ``FileNotFoundError``.
   file has 3-D cells; any other 3-D cell (quadratic, polyhedral) is an error naming it.
 
 The field is a point array chosen by name (``scalars``; default: the first array with
-one component). Points no cell uses are kept. :func:`is_mesh_file` says whether a path
+one component and more than three distinct values, so that blanking flags such as
+IBlank are passed over; the first one-component array if all are flags). Points no cell uses are kept. :func:`is_mesh_file` says whether a path
 is a mesh rather than a volume; :func:`point_arrays` lists a mesh file's point arrays.
 
 :func:`save_png` writes a premultiplied float RGBA image (conventions section 7)
@@ -215,13 +216,14 @@ def load_volume(path, shape=None, dtype=None, spacing=None, origin=None, mask_no
         dtype = _parse_dtype(dtype)
 
     lower = path.lower()
+    orientation = None   # anatomical, where the file says (NIfTI, NRRD)
     if lower.endswith((".npy", ".npz", ".nrrd", ".nhdr", ".mhd", ".mha")):
         if lower.endswith(".npy"):
             data, file_spacing, file_origin = _load_npy(path), None, None
         elif lower.endswith(".npz"):
             data, file_spacing, file_origin = _load_npz(path)
         elif lower.endswith((".nrrd", ".nhdr")):
-            data, file_spacing, file_origin = _load_nrrd(path)
+            data, file_spacing, file_origin, orientation = _load_nrrd(path)
         else:
             data, file_spacing, file_origin = _load_metaimage(path)
         if data.ndim != 3:
@@ -235,7 +237,7 @@ def load_volume(path, shape=None, dtype=None, spacing=None, origin=None, mask_no
         spacing = spacing if spacing is not None else (file_spacing or (1.0, 1.0, 1.0))
         origin = origin if origin is not None else (file_origin or (0.0, 0.0, 0.0))
     elif lower.endswith((".nii", ".nii.gz")):
-        data, file_spacing, file_origin = _load_nifti(path)
+        data, file_spacing, file_origin, orientation = _load_nifti(path)
         if shape is not None and tuple(data.shape) != shape:
             raise InputError("shape", f"{path!r} holds shape {tuple(data.shape)} (nz, ny, nx), "
                                       f"not the {shape} given")
@@ -261,7 +263,7 @@ def load_volume(path, shape=None, dtype=None, spacing=None, origin=None, mask_no
         data = _load_raw(path, shape, dtype)
         origin = origin if origin is not None else (0.0, 0.0, 0.0)
     data = _volume_dtype(data, path)
-    return Volume(data, spacing=spacing, origin=origin, mask_nonfinite=mask_nonfinite)
+    return Volume(data, spacing=spacing, origin=origin, mask_nonfinite=mask_nonfinite, orientation=orientation)
 
 
 SUPPORTED_VOLUMES = (".npy, .npz, .nrrd/.nhdr, .mhd/.mha, .nii/.nii.gz (with nibabel), .vti, .slc and "
@@ -326,7 +328,7 @@ def _load_vtk_image(path):
 
 @_named_errors
 def _load_nifti(path):
-    """(data (nz, ny, nx), spacing, origin) of a NIfTI file, through nibabel."""
+    """(data (nz, ny, nx), spacing, origin, orientation) of a NIfTI file, through nibabel."""
     try:
         import nibabel
     except ImportError:
@@ -347,7 +349,8 @@ def _load_nifti(path):
         warnings.warn(f"{path}: the affine's axes are not x, y, z with positive steps; the volume is shown "
                       "axis-aligned in index order, without that orientation", stacklevel=3)
     origin = tuple(float(v) for v in affine[:3, 3])
-    return np.ascontiguousarray(np.transpose(data, (2, 1, 0))), zooms, origin
+    orientation = "".join(nibabel.aff2axcodes(affine))   # where the index axes point
+    return np.ascontiguousarray(np.transpose(data, (2, 1, 0))), zooms, origin, orientation
 
 
 def _volume_dtype(data, path):
@@ -531,7 +534,7 @@ def _load_nrrd(path):
         raise InputError("sizes", f"{path!r}: the data does not match sizes {sizes} "
                                   f"of {header['type']}: {e}") from None
     spacing, origin = _nrrd_geometry(header, path)
-    return data, spacing, origin
+    return data, spacing, origin, _nrrd_orientation(header)
 
 
 def _is_format_spec(spec):
@@ -606,6 +609,29 @@ def _nrrd_error(exc, field, where, need):
     if m:
         return InputError(field, f"{where} holds {m.group(2)} samples, but {need} {m.group(1)}")
     return InputError(field, f"{where}: {exc}")
+
+
+_NRRD_SPACES = {"right-anterior-superior": "RAS", "ras": "RAS", "left-anterior-superior": "LAS", "las": "LAS",
+                "left-posterior-superior": "LPS", "lps": "LPS"}
+_OPPOSITE = {"R": "L", "L": "R", "A": "P", "P": "A", "S": "I", "I": "S"}
+
+
+def _nrrd_orientation(header):
+    """Where the index axes point anatomically (e.g. "RAS"), from an anatomical ``space``
+    and the ``space directions`` (each axis named by its vector's largest component, with
+    its sign); None for other spaces (``3D-left-handed`` and the like)."""
+    space = _NRRD_SPACES.get(str(header.get("space", "")).lower())
+    if space is None:
+        return None
+    directions = header.get("space directions")
+    d = np.eye(3) if directions is None else np.array(directions, dtype=np.float64)
+    if d.shape != (3, 3) or not np.all(np.isfinite(d)):
+        return None
+    codes = []
+    for vector in d:
+        axis = int(np.argmax(np.abs(vector)))
+        codes.append(space[axis] if vector[axis] > 0 else _OPPOSITE[space[axis]])
+    return "".join(codes) if len(set(codes)) == 3 else None
 
 
 def _nrrd_geometry(header, path):
@@ -928,16 +954,24 @@ def point_arrays(path) -> dict:
     return {name: _components(a) for name, a in _read_mesh_file(path).arrays.items()}
 
 
+def _is_flag(values):
+    """A point array of at most three distinct values (a blanking or ghost flag)."""
+    return len(np.unique(np.asarray(values).ravel()[:100000])) <= 3
+
+
 def load_mesh(path, scalars=None) -> TetMesh:
     """Read a mesh file (see the module docstring for formats) with the point array
-    ``scalars`` (default: the first one-component point array) as the field."""
+    ``scalars`` (default: the first one-component point array that is not a flag of at
+    most three values, such as IBlank) as the field."""
     path = _mesh_path(path)
     content = _read_mesh_file(path)
     arrays = content.arrays
     listing = ", ".join(f"{n} ({_components(a)} components)" if _components(a) != 1 else n
                         for n, a in arrays.items()) or "none"
     if scalars is None:
-        name = next((n for n, a in arrays.items() if _components(a) == 1), None)
+        candidates = [n for n, a in arrays.items() if _components(a) == 1]
+        # a field, not a flag: blanking arrays (IBlank: -1, 0, 1) come first in some files
+        name = next((n for n in candidates if not _is_flag(arrays[n])), candidates[0] if candidates else None)
         if name is None:
             raise InputError("scalars", f"{path!r} has no scalar point array to render "
                                         f"(point arrays: {listing})")
@@ -955,9 +989,11 @@ def load_mesh(path, scalars=None) -> TetMesh:
     if points.ndim != 2 or points.shape[1] != 3:
         raise InputError("points", f"{path!r}: points must be (N, 3), got shape {points.shape}")
     try:
-        return TetMesh(points, content.tets, values.reshape(len(values)).astype(np.float64))
+        mesh = TetMesh(points, content.tets, values.reshape(len(values)).astype(np.float64))
     except (TypeError, ValueError) as e:
         raise InputError("mesh", f"{path!r}: {e}") from None
+    mesh.scalars_name = name     # which array the field is (dvr-gl info marks it)
+    return mesh
 
 
 # ----------------------------------------------------------------------------- images

@@ -113,7 +113,8 @@ class Volume:
         otherwise non-finite samples are an error.
     """
 
-    def __init__(self, data, spacing=(1.0, 1.0, 1.0), origin=(0.0, 0.0, 0.0), mask_nonfinite=False):
+    def __init__(self, data, spacing=(1.0, 1.0, 1.0), origin=(0.0, 0.0, 0.0), mask_nonfinite=False,
+                 orientation=None):
         if not isinstance(data, np.ndarray):
             raise TypeError(f"data must be a numpy array, got {type(data).__name__}")
         if data.dtype.type not in SUPPORTED_DTYPES:
@@ -126,6 +127,7 @@ class Volume:
         self.spacing = _vector3("spacing", spacing, positive=True)
         self.origin = _vector3("origin", origin)
         self.mask_nonfinite = bool(mask_nonfinite)
+        self.orientation = _orientation(orientation)
 
         data = np.array(data, copy=True, order="C")
         data.setflags(write=False)
@@ -664,10 +666,44 @@ class Scene:
                 f"mode={self.mode!r}, iso_value={self.iso_value})")
 
 
-def default_camera(volume, azimuth=0.0, elevation=0.0, zoom=1.0, fov=30.0, ortho=False):
+def anatomical_frame(volume):
+    """(front, up) world directions of a volume with an anatomical ``orientation``: the
+    anterior direction (where a face looks) and the superior one; None without one."""
+    codes = getattr(volume, "orientation", None)
+    if codes is None:
+        return None
+    out = {}
+    for axis, letter in enumerate(codes):
+        for positive, negative in (("A", "P"), ("S", "I")):
+            if letter in (positive, negative):
+                v = np.zeros(3)
+                v[axis] = 1.0 if letter == positive else -1.0
+                out[positive] = v
+    return out["A"], out["S"]
+
+
+def _orientation(codes):
+    """None, or three letters naming where the x, y and z axes point: one of R/L, one of
+    A/P, one of S/I (as nibabel's ``aff2axcodes``)."""
+    if codes is None:
+        return None
+    try:
+        text = codes.upper() if isinstance(codes, str) else "".join(codes).upper()
+    except TypeError:
+        text = ""
+    pair_of = {c: i for i, pair in enumerate(("RL", "AP", "SI")) for c in pair}
+    if len(text) != 3 or sorted(pair_of.get(c, -1) for c in text) != [0, 1, 2]:
+        raise ValueError(f"orientation must be three letters, one each of R/L, A/P and S/I (as 'RAS'), "
+                         f"got {codes!r}")
+    return text
+
+
+def default_camera(volume, azimuth=0.0, elevation=0.0, zoom=1.0, fov=30.0, ortho=False, front=None, up=None):
     """A camera looking at the centre of the volume's (or mesh's) box along -z with +y up, far enough
     that the box's bounding sphere fits the view; ``azimuth`` turns it about +y and then
-    ``elevation`` about the camera's right axis (degrees); ``zoom`` > 1 moves closer."""
+    ``elevation`` about the camera's right axis (degrees); ``zoom`` > 1 moves closer.
+    ``front`` and ``up`` (unit world directions, together) start it elsewhere: the eye on
+    the ``front`` side, ``up`` up (``anatomical_frame`` gives a patient's)."""
     zoom = _finite_number("zoom", zoom, positive=True)
     azimuth = _finite_number("azimuth", azimuth)
     elevation = _finite_number("elevation", elevation)
@@ -675,9 +711,18 @@ def default_camera(volume, azimuth=0.0, elevation=0.0, zoom=1.0, fov=30.0, ortho
     centre = (lo + hi) / 2
     radius = float(np.linalg.norm(hi - lo)) / 2
     az, el = math.radians(azimuth), math.radians(elevation)
-    # Start looking along -z (eye on +z); rotate the eye offset and the up vector together.
-    offset = np.array([math.sin(az) * math.cos(el), math.sin(el), math.cos(az) * math.cos(el)])
-    up = np.array([-math.sin(az) * math.sin(el), math.cos(el), -math.cos(az) * math.sin(el)])
+    if front is None:
+        # Start looking along -z (eye on +z); rotate the eye offset and the up vector together.
+        offset = np.array([math.sin(az) * math.cos(el), math.sin(el), math.cos(az) * math.cos(el)])
+        up = np.array([-math.sin(az) * math.sin(el), math.cos(el), -math.cos(az) * math.sin(el)])
+    else:
+        front = _vector3("front", front) / np.linalg.norm(front)
+        up0 = _vector3("up", up) / np.linalg.norm(up)
+        if abs(float(front @ up0)) > 1e-9:
+            raise ValueError(f"front and up must be perpendicular, got {tuple(front)} and {tuple(up0)}")
+        horizontal = math.cos(az) * front + math.sin(az) * np.cross(up0, front)
+        offset = math.cos(el) * horizontal + math.sin(el) * up0
+        up = math.cos(el) * up0 - math.sin(el) * horizontal
     if ortho:
         return Camera(centre + offset * 2 * radius, centre, up, ortho_height=2 * radius / zoom)
     distance = radius / math.sin(math.radians(fov) / 2) / zoom

@@ -94,25 +94,123 @@ def lut_max_error(tf: TransferFunction, size: int = LUT_SIZE, samples: int = 200
     return float(np.abs(lut.lookup(s) - exact).max())
 
 
-def auto_preset(volume, unit_distance=None) -> TransferFunction:
-    """Greyscale ramp whose opacity rises from 0 to 0.5 over the data's 1st to 99th
-    percentile; unit distance one voxel (the smallest spacing) unless given. For a
-    TetMesh the percentiles are over its point scalars and the unit distance is one
-    cell (``mesh.cell_size``, the median edge length)."""
-    if isinstance(volume, TetMesh):
-        values = volume.scalars
-        default_unit = volume.cell_size
-    else:
-        values = volume.data[np.isfinite(volume.data)] if volume.has_nonfinite else volume.data
-        default_unit = volume.min_spacing
-    lo, hi = (float(v) for v in np.percentile(values, [1, 99]))
+# -- presets ----------------------------------------------------------------------------------
+
+# Built-in colour ramps (no matplotlib needed): evenly spaced over the data's window.
+RAMPS = {
+    "warm": [(0.30, 0.06, 0.03), (0.78, 0.30, 0.10), (0.96, 0.66, 0.36), (1.00, 0.93, 0.80)],
+    "coolwarm": [(0.23, 0.30, 0.75), (0.62, 0.74, 0.99), (0.87, 0.87, 0.87), (0.96, 0.60, 0.48),
+                 (0.71, 0.02, 0.15)],
+    "grey": [(0.0, 0.0, 0.0), (1.0, 1.0, 1.0)],
+}
+#: matplotlib colormaps offered by name (``--tf viridis``); any other as ``cmap:NAME``.
+COLORMAPS = ("viridis", "magma", "inferno", "plasma", "cividis", "gray", "bone")
+
+
+def _sample_values(data):
+    if isinstance(data, TetMesh):
+        return data.scalars, data.cell_size
+    values = data.data[np.isfinite(data.data)] if data.has_nonfinite else data.data
+    return values, data.min_spacing
+
+
+def window(data, lo_pct=1.0, hi_pct=99.0):
+    """The (lo, hi) percentiles of the data's values (its range, or a unit span, where
+    they coincide)."""
+    values, _ = _sample_values(data)
+    lo, hi = (float(v) for v in np.percentile(values, [lo_pct, hi_pct]))
     if hi <= lo:
-        lo, hi = volume.data_range
+        lo, hi = data.data_range if not isinstance(data, TetMesh) else (float(values.min()), float(values.max()))
         if hi <= lo:
             hi = lo + 1.0
-    return TransferFunction(color=[(lo, 0.0, 0.0, 0.0), (hi, 1.0, 1.0, 1.0)],
-                            opacity=[(lo, 0.0), (hi, 0.5)],
-                            unit_distance=unit_distance or default_unit)
+    return lo, hi
+
+
+def ramp_preset(data, colors, lo=None, hi=None, peak=0.5, unit_distance=None) -> TransferFunction:
+    """``colors`` evenly spaced from ``lo`` to ``hi`` (default: the 1st and 99th
+    percentiles), opacity rising linearly from 0 to ``peak`` over the same window; unit
+    distance one voxel (a mesh: one cell) unless given."""
+    _, unit = _sample_values(data)
+    if lo is None or hi is None:
+        lo, hi = window(data)
+    xs = np.linspace(lo, hi, len(colors))
+    return TransferFunction(color=[(float(x), *c) for x, c in zip(xs, colors)],
+                            opacity=[(lo, 0.0), (hi, peak)], unit_distance=unit_distance or unit)
+
+
+def colormap_preset(data, name, peak=0.5) -> TransferFunction:
+    """A matplotlib colormap (``viridis``, ``magma``, ...) as a ramp preset."""
+    try:
+        import matplotlib
+    except ImportError:
+        raise ValueError(f"the colormap preset {name!r} needs matplotlib: pip install matplotlib") from None
+    try:
+        cmap = matplotlib.colormaps[name]
+    except KeyError:
+        raise ValueError(f"matplotlib has no colormap {name!r}") from None
+    return ramp_preset(data, [tuple(float(c) for c in rgba[:3]) for rgba in cmap(np.linspace(0, 1, 9))], peak=peak)
+
+
+def looks_like_hu(data):
+    """CT in Hounsfield units: signed values reaching down to air (about -1000) and up
+    to bone."""
+    if isinstance(data, TetMesh):
+        return False
+    lo, hi = window(data, 0.5, 99.5)
+    return lo <= -500 and hi >= 200
+
+
+def ct_preset(data, kind="ct") -> TransferFunction:
+    """CT in Hounsfield units: ``ct`` skin a faint flesh-coloured veil and bone ivory;
+    ``ct_bone`` bone alone; ``ct_lung`` the lungs' airways and vessels. Unit distance one
+    voxel; meant to be lit."""
+    _, unit = _sample_values(data)
+    if kind == "ct_bone":
+        return TransferFunction(color=[(150, 0.75, 0.55, 0.40), (400, 0.95, 0.88, 0.74), (1500, 1.0, 1.0, 0.96)],
+                                opacity=[(150, 0.0), (300, 0.25), (1000, 0.85)], unit_distance=unit)
+    if kind == "ct_lung":
+        return TransferFunction(color=[(-950, 0.55, 0.65, 0.85), (-600, 0.85, 0.55, 0.55), (0, 0.9, 0.3, 0.25)],
+                                opacity=[(-1000, 0.0), (-920, 0.0), (-800, 0.02), (-600, 0.0), (-200, 0.0),
+                                         (0, 0.15), (200, 0.0)], unit_distance=unit)
+    return TransferFunction(
+        color=[(-600, 0.55, 0.25, 0.15), (-100, 0.85, 0.55, 0.45), (100, 0.88, 0.60, 0.48),
+               (300, 0.90, 0.80, 0.62), (1200, 1.00, 0.98, 0.92)],
+        opacity=[(-600, 0.0), (-300, 0.0), (-100, 0.03), (100, 0.01), (200, 0.0), (300, 0.15),
+                 (1200, 0.7)], unit_distance=unit)
+
+
+def mr_preset(data) -> TransferFunction:
+    """MRI: the background (the darkest two fifths of the samples) clear, tissue from
+    pink to white, opacity rising to 0.6 at the 99.5th percentile; meant to be lit."""
+    lo, hi = window(data, 40.0, 99.5)
+    return ramp_preset(data, [(0.55, 0.30, 0.28), (0.92, 0.72, 0.66), (1.0, 0.97, 0.93)], lo, hi, peak=0.6)
+
+
+def auto_preset(volume, unit_distance=None) -> TransferFunction:
+    """The preset the data suggests: CT in Hounsfield units gets ``ct``; a volume with an
+    anatomical orientation (an MRI from NIfTI or NRRD) ``mr``; a mesh the ``coolwarm``
+    ramp over the 1st to 99th percentile; anything else the ``warm`` ramp (dark red to
+    ivory) from the median to the 99.5th percentile; opacity rising from 0 to 0.5. Unit distance one voxel (the smallest
+    spacing; a mesh: the median edge length) unless given."""
+    if unit_distance is None and not isinstance(volume, TetMesh):
+        if looks_like_hu(volume):
+            return ct_preset(volume)
+        if getattr(volume, "orientation", None) is not None:
+            return mr_preset(volume)
+    if isinstance(volume, TetMesh):
+        return ramp_preset(volume, RAMPS["coolwarm"], unit_distance=unit_distance)
+    # a scan's lower half is mostly background or noise: the ramp starts at the median
+    lo, hi = window(volume, 50.0, 99.5)
+    return ramp_preset(volume, RAMPS["warm"], lo, hi, unit_distance=unit_distance)
+
+
+def auto_preset_name(data):
+    """The name of the preset :func:`auto_preset` picks."""
+    if looks_like_hu(data):
+        return "ct"
+    if getattr(data, "orientation", None) is not None:
+        return "mr"
+    return "coolwarm ramp" if isinstance(data, TetMesh) else "warm ramp"
 
 
 def load_tf_json(path) -> TransferFunction:

@@ -56,7 +56,7 @@ import numpy as np
 
 from . import io as dvr_io
 from .gl.context import current, idle_framebuffer
-from .scene import ILLUSTRATION_TERMS, MODES, OPTICAL_MODELS, Camera, Scene, default_camera
+from .scene import ILLUSTRATION_TERMS, MODES, OPTICAL_MODELS, Camera, Scene
 from .viewer_overlay import OverlayDrawer, TFEditor
 
 PROG = "dvr-gl view"
@@ -92,7 +92,7 @@ dvr-gl view: keys and mouse
   t / T                next / previous technique (those that can render this data)
   m / M                next / previous mode (composite, mip, minip, average, isosurface)
   , / .                iso value down / up (isosurface mode; shift: 5x)
-  l                    shading on / off
+  l                    shading on / off (on at the start where the technique lights samples)
   x                    optical model: emission-absorption, absorption only, emission only, Sabella
   i                    illustration: none, boundary, silhouette, tone, depth cue, all four
   p                    pre-integration on / off (techniques that offer it)
@@ -139,7 +139,7 @@ class Orbit:
     sphere), as :func:`dvr_gl.default_camera` does.
     """
 
-    def __init__(self, volume, azimuth=0.0, elevation=0.0, zoom=1.0, fov=30.0, ortho=False):
+    def __init__(self, volume, azimuth=None, elevation=None, zoom=1.0, fov=30.0, ortho=False):
         self.volume = volume
         lo, hi = volume.bounds
         self.radius = float(np.linalg.norm(hi - lo)) / 2
@@ -148,8 +148,9 @@ class Orbit:
         self.reset()
 
     def reset(self):
-        """Back to the command line's view (``default_camera`` of its angles)."""
-        cam = default_camera(self.volume, **self.start)
+        """Back to the command line's view (``inputs.first_camera`` of its angles)."""
+        from .inputs import first_camera
+        cam = first_camera(self.volume, **self.start)
         self.ortho = cam.is_ortho
         self.target = cam.target.copy()
         self.rotation = np.column_stack([cam.right, cam.true_up, -cam.forward])
@@ -448,8 +449,8 @@ class Settings:
     iso: float | None = None
     step: float | None = None
     size: tuple = (512, 512)
-    azimuth: float = 0.0
-    elevation: float = 0.0
+    azimuth: float | None = None         # None: the first view's (inputs.first_camera)
+    elevation: float | None = None
     zoom: float = 1.0
     fov: float = 30.0
     ortho: bool = False
@@ -460,7 +461,7 @@ class Settings:
     vsync: bool = True
     visible: bool = True
     options: dict = field(default_factory=dict)   # technique options (preintegrate, interpolate, ...)
-    shading: bool = False                # lit composite (key l switches it)
+    shading: bool | None = None          # lit composite (key l switches it); None: lit where defined
     optical_model: str = "emission_absorption"   # composite's optical model (key x cycles it)
     illustration: tuple = ()             # Ebert-Rheingans terms by name (key i cycles them)
     lights: tuple | None = None          # dvr_gl.Light objects; None: the headlight
@@ -505,7 +506,7 @@ class Viewer:
         self.initial_tf = settings.tf
         self.mode = settings.mode
         self.iso = settings.iso if settings.iso is not None else self._default_iso()
-        self.shading = settings.shading
+        self.shading = True if settings.shading is None else settings.shading   # the wish; see lit
         self.optical_model = settings.optical_model
         self.illustration = tuple(settings.illustration)
         self.lights = settings.lights
@@ -703,8 +704,14 @@ class Viewer:
     def _scene(self, width, height, tf=None):
         return Scene(self.volume, tf or self.tf, self.orbit.camera(), width=width, height=height,
                      mode=self.mode, iso_value=self.iso if self.mode == "isosurface" else None,
-                     shading=self.shading, **({"lights": self.lights} if self.lights else {}),
+                     shading=self.lit, **({"lights": self.lights} if self.lights else {}),
                      optical_model=self.optical_model, illustration=self.illustration)
+
+    @property
+    def lit(self):
+        """Whether the scene is lit: the user's wish (key l), where lighting is defined."""
+        from .inputs import shading_for
+        return shading_for(self.technique, self.mode, self.optical_model, self.shading)
 
     def _options(self, name=None):
         info = self.techniques[name or self.technique]
@@ -921,7 +928,12 @@ class Viewer:
         elif key in (KEY_COMMA, KEY_PERIOD):
             self.nudge_iso((1 if key == KEY_PERIOD else -1) * (5 if shift else 1))
         elif char == "l":
-            self._try(lambda: setattr(self, "shading", not self.shading), "switch shading")
+            from .inputs import shading_for
+            if not shading_for(self.technique, self.mode, self.optical_model):
+                self.say(f"cannot switch shading: {self.technique} in mode {self.mode} with optical model "
+                         f"{self.optical_model} does not light samples")
+            elif self._try(lambda: setattr(self, "shading", not self.shading), "switch shading"):
+                self.say("shading " + ("on" if self.lit else "off"))
         elif char == "i":
             choices = [()] + [(name,) for name in ILLUSTRATION_TERMS] + [tuple(ILLUSTRATION_TERMS)]
             current = choices.index(self.illustration) if self.illustration in choices else 0
@@ -994,7 +1006,7 @@ class Viewer:
             result = self._try(lambda: setattr(self, "mode", mode), f"use mode {mode}", quiet=True)
             if result is True:
                 self._touch_overlay()
-                why = "lit" if self.shading else ""
+                why = "lit" if self.lit else ""
                 self.say(f"mode {mode}" + (f" {self.iso:g}" if mode == "isosurface" else "")
                          + (f" ({self.technique} cannot render {', '.join(skipped)}{' ' + why if why else ''})"
                             if skipped else ""))
@@ -1060,11 +1072,12 @@ class Viewer:
             self.say(f"{self.technique} has a fixed sample distance")
 
     def presets(self):
-        """The transfer functions keys 1..9 choose: the one given, then the presets."""
-        from .inputs import PRESETS
+        """The transfer functions keys 1..9 choose: the one given, then the presets that
+        suit the data (``inputs.suitable_presets``)."""
+        from .inputs import PRESETS, suitable_presets
 
         items = [(self.settings.tf_name, lambda volume: self.initial_tf)]
-        items += [(name, make) for name, make in PRESETS.items()]
+        items += [(name, PRESETS[name]) for name in suitable_presets(self.volume)]
         return items[:9]
 
     def apply_preset(self, number):
@@ -1225,7 +1238,7 @@ class Viewer:
         extras = [k for k in ("preintegrate",) if self._options().get(k)]
         if self.info.accepts("sort") and self.info.params is not None:
             extras.append(str(self._options().get("sort", "mpvo")))
-        if self.shading:
+        if self.lit:
             extras.append("shaded")
         if self._accumulates():
             extras.append(f"{f.accumulated} sets")
@@ -1485,7 +1498,7 @@ def settings_from_args(args) -> Settings:
                     azimuth=args.azimuth, elevation=args.elevation, zoom=args.zoom, fov=args.fov,
                     ortho=args.ortho, background=args.background, screenshot=screenshot,
                     tf_out=args.tf_out, editor=not args.hide_editor, vsync=args.frames is None,
-                    options=options, shading=bool(getattr(args, "shading", False)),
+                    options=options, shading=getattr(args, "shading", None),
                     lights=tuple(args.light) if getattr(args, "light", None) else None,
                     optical_model=getattr(args, "optical_model", None) or "emission_absorption",
                     illustration=tuple(getattr(args, "illustration", None) or ()))

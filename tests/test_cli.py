@@ -16,6 +16,7 @@ from PIL import Image
 
 import dvr_gl
 from dvr_gl import cli
+from dvr_gl.inputs import first_camera
 from dvr_gl.io import load_volume, to_png_array
 from dvr_gl.transfer import auto_preset
 
@@ -55,7 +56,7 @@ def test_render_npy_writes_what_the_library_renders(renderer, tiny, capsys):
     assert mode == "RGBA" and px.shape == (32, 32, 4)
     assert px[..., 3].max() > 0 and px[0, 0, 3] == 0  # something drawn, corner empty
     vol = load_volume(d / "tiny.npy")
-    scene = dvr_gl.Scene(vol, auto_preset(vol), dvr_gl.default_camera(vol), 32, 32)
+    scene = dvr_gl.Scene(vol, auto_preset(vol), first_camera(vol), 32, 32, shading=True)   # lit by default
     assert np.array_equal(px, to_png_array(renderer.render(scene)))
     assert "32x32" in stdout and "raycast" in stdout and "wrote" in stdout and "first frame" in stdout
     assert sorted(os.listdir(d)) == ["tiny.npy", "tiny.png", "tiny.raw"]  # no temporary left
@@ -116,12 +117,12 @@ BAD = [
     (["--dtype", "int16"], "--dtype", "int16"),
     (["--shading", "--mode", "mip"], "--shading", "not --mode mip"),
     (["--shading", "--technique", "particles"], "--shading", "not particles"),
-    (["--gradients", "texture"], "--gradients", "only used with --shading"),
+    (["--no-shading", "--gradients", "texture"], "--gradients", "only used with --shading"),
     (["--illustration", "halo"], "argument --illustration", "'halo'"),
     (["--illustration", "tone", "--mode", "mip"], "--illustration", "not --mode mip"),
     (["--illustration", "boundary", "--preintegrate"], "--illustration", "leave out --preintegrate"),
     (["--gradients", "sobel"], "argument --gradients", "'sobel'"),
-    (["--light", "world:1,1,0"], "--light", "only used with --shading"),
+    (["--no-shading", "--light", "world:1,1,0"], "--light", "only used with --shading"),
     (["--shading", "--light", "sun:1,1,0"], "argument --light", "'sun:1,1,0'"),
     (["--shading", "--light", "world:0,0,0"], "argument --light", "zero vector"),
     (["--shading", "--light", "view:1,1,1:-2"], "argument --light", "non-negative"),
@@ -357,7 +358,7 @@ def test_render_mesh_writes_what_the_library_renders(renderer, tiny_mesh, capsys
     assert code == 0, err
     mode, px = _png(out)
     assert mode == "RGBA" and px.shape == (32, 32, 4) and px[..., 3].max() > 0 and px[0, 0, 3] == 0
-    scene = dvr_gl.Scene(mesh, auto_preset(mesh), dvr_gl.default_camera(mesh, 0, 20), 32, 32)
+    scene = dvr_gl.Scene(mesh, auto_preset(mesh), first_camera(mesh, elevation=20), 32, 32)
     assert np.array_equal(px, to_png_array(renderer.render(scene, technique="tetra")))
     assert f"{mesh.n_points} points, {mesh.n_tets} tets, scalars ramp" in stdout
     assert "tetra" in stdout and "sort mpvo" in stdout and "spacing" not in stdout
@@ -498,7 +499,7 @@ def test_render_particles_on_a_grid_and_a_mesh(renderer, tiny, tiny_mesh, capsys
     code, stdout, err = _run(["render", d / "tiny.npy"] + argv, capsys)
     assert code == 0, err
     assert "particles" in stdout
-    scene = dvr_gl.Scene(vol, auto_preset(vol), dvr_gl.default_camera(vol), 24, 24)
+    scene = dvr_gl.Scene(vol, auto_preset(vol), first_camera(vol), 24, 24)
     assert np.array_equal(_png(out)[1], to_png_array(renderer.render(scene, technique="particles",
                                                                      repetitions=3, seed=2)))
     dm, mesh = tiny_mesh
@@ -545,7 +546,7 @@ def test_render_splat_options(renderer, tiny, capsys):
             "--out", out]
     code, stdout, err = _run(["render", d / "tiny.npy"] + argv, capsys)
     assert code == 0, err
-    scene = dvr_gl.Scene(vol, auto_preset(vol), dvr_gl.default_camera(vol), 24, 24)
+    scene = dvr_gl.Scene(vol, auto_preset(vol), first_camera(vol), 24, 24)
     want = renderer.render(scene, technique="splat", density=2, radius=0.5, cutoff=2.5)
     assert np.array_equal(_png(out)[1], to_png_array(want)) and want[..., 3].max() > 0
     for extra, message in ((["--step", "1"], "--step: splat takes no step"),
@@ -626,7 +627,7 @@ def test_render_shading_writes_what_the_library_renders(renderer, tiny, capsys):
     PNG is the library's lit image."""
     d, _ = tiny
     vol = load_volume(d / "tiny.npy")
-    lit = dvr_gl.Scene(vol, auto_preset(vol), dvr_gl.default_camera(vol, azimuth=30), 32, 32, shading=True)
+    lit = dvr_gl.Scene(vol, auto_preset(vol), first_camera(vol, azimuth=30), 32, 32, shading=True)
     for extra, options in (([], {}), (["--gradients", "texture", "--technique", "slice3d"],
                                       {"gradients": "texture", "technique": "slice3d"})):
         out = d / "lit.png"
@@ -673,13 +674,13 @@ def test_render_optical_models(renderer, tiny, capsys):
     unless --background says otherwise."""
     d, _ = tiny
     vol = load_volume(d / "tiny.npy")
-    scene = dvr_gl.Scene(vol, auto_preset(vol), dvr_gl.default_camera(vol), 32, 32)
+    scene = dvr_gl.Scene(vol, auto_preset(vol), first_camera(vol), 32, 32)
     for model, background in (("absorption", None), ("emission", (0.0, 0.0, 0.0)), ("sabella", None)):
         out = d / f"{model}.png"
         code, stdout, err = _run(["render", d / "tiny.npy", "--size", "32x32", "--optical-model", model,
                                   "--out", out], capsys)
         assert code == 0, err
-        image = renderer.render(scene.replace(optical_model=model))
+        image = renderer.render(scene.replace(optical_model=model, shading=model == "emission"))
         assert np.array_equal(_png(out)[1], to_png_array(image, background))
         assert ("RGB over background" in stdout) == (background is not None)
 
@@ -687,7 +688,7 @@ def test_render_optical_models(renderer, tiny, capsys):
 def test_render_illustration(renderer, tiny, capsys):
     d, _ = tiny
     vol = load_volume(d / "tiny.npy")
-    scene = dvr_gl.Scene(vol, auto_preset(vol), dvr_gl.default_camera(vol), 32, 32,
+    scene = dvr_gl.Scene(vol, auto_preset(vol), first_camera(vol), 32, 32, shading=True,
                          illustration=("silhouette", "tone"))
     out = d / "illustrated.png"
     code, _, err = _run(["render", d / "tiny.npy", "--size", "32x32", "--illustration", "silhouette,tone",

@@ -272,6 +272,7 @@ def test_nrrd_space_directions_and_origin(tmp_path):
     v = load_volume(p)
     assert np.array_equal(v.data, a)
     assert v.spacing.tolist() == [0.5, 0.25, 3.0] and v.origin.tolist() == [10.0, -20.0, 5.0]
+    assert v.orientation == "LPS"    # the anatomical space, axis by axis
     # spacing and origin given replace the file's
     v = load_volume(p, spacing=(1, 1, 1), origin=(0, 0, 0))
     assert v.spacing.tolist() == [1, 1, 1] and v.origin.tolist() == [0, 0, 0]
@@ -286,6 +287,14 @@ def test_nrrd_rotated_directions_warn_and_use_lengths(tmp_path):
     with pytest.warns(UserWarning, match="space directions"):
         v = load_volume(p)
     assert np.allclose(v.spacing, [2, 3, 4])
+    assert v.orientation == "RAI"    # each axis named by its vector's largest component and sign
+
+
+def test_nrrd_without_an_anatomical_space_has_no_orientation(tmp_path):
+    p = tmp_path / "plain.nrrd"
+    nrrd.write(str(p), np.zeros((2, 2, 2), np.uint8), {"space": "3D-left-handed", "spacings": [1, 1, 1]},
+               index_order="C")
+    assert load_volume(p).orientation is None
 
 
 @pytest.mark.skipif(not os.path.isdir(HEADSQ), reason="shared test data not present")
@@ -691,6 +700,12 @@ def test_nifti_through_nibabel(tmp_path):
     v = load_volume(p)
     assert v.data.shape == (5, 4, 3) and np.array_equal(v.data, np.transpose(xyz, (2, 1, 0)))
     assert v.spacing.tolist() == [1, 2, 3] and v.origin.tolist() == [-5, 6, 7.5]
+    assert v.orientation == "RAS"
+    flipped = affine.copy()
+    flipped[0, 0] = -1.0     # x runs to the left: the camera still finds the face
+    nib.save(nib.Nifti1Image(xyz, flipped), str(tmp_path / "f.nii"))
+    with pytest.warns(UserWarning, match="axis-aligned"):
+        assert load_volume(tmp_path / "f.nii").orientation == "LAS"
     rotated = affine.copy()
     rotated[:3, :3] = [[0, -2.0, 0], [1.0, 0, 0], [0, 0, 3.0]]
     nib.save(nib.Nifti1Image(xyz, rotated), str(tmp_path / "r.nii"))

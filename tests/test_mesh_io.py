@@ -363,10 +363,12 @@ def test_bluntfin_npz_and_vtu_agree():
 
 def test_auto_preset_for_a_mesh():
     mesh = load_mesh(POST)
-    tf = auto_preset(mesh)
+    tf = auto_preset(mesh)        # the coolwarm ramp over the 1st to 99th percentile
     lo, hi = np.percentile(mesh.scalars, [1, 99])
-    assert np.allclose(tf.knots, [lo, hi]) and tf.unit_distance == mesh.cell_size
+    assert np.allclose(tf.knots[[0, -1]], [lo, hi]) and tf.unit_distance == mesh.cell_size
+    assert np.allclose(tf.opacity_points, [[lo, 0.0], [hi, 0.5]])
     assert auto_preset(mesh, unit_distance=0.25).unit_distance == 0.25
     vol = dvr_gl.Volume(np.arange(27, dtype=np.float32).reshape(3, 3, 3), spacing=(2, 0.5, 1))
-    grid_tf = auto_preset(vol)
-    assert grid_tf.unit_distance == 0.5 and np.allclose(grid_tf.knots, np.percentile(vol.data, [1, 99]))
+    grid_tf = auto_preset(vol)    # the warm ramp from the median to the 99.5th percentile
+    assert grid_tf.unit_distance == 0.5
+    assert np.allclose(grid_tf.knots[[0, -1]], np.percentile(vol.data, [50, 99.5]))

@@ -258,3 +258,19 @@ def test_light_directions():
     scene = dvr_gl.Scene(VOL, TF, CAM)
     assert scene.headlight_only and scene.replace(lights=dvr_gl.Light()).digest() == scene.digest()
     assert not scene.replace(lights=dvr_gl.Light(intensity=0.5)).headlight_only
+
+
+@pytest.mark.parametrize("codes", ["RAA", "XYZ", "RA", "RASL", 5])
+def test_volume_orientation_rejects(codes):
+    with pytest.raises((ValueError, TypeError), match="orientation must be three letters"):
+        dvr_gl.Volume(DATA, orientation=codes)
+
+
+def test_volume_orientation_and_its_frame():
+    from dvr_gl.scene import anatomical_frame
+    assert dvr_gl.Volume(DATA).orientation is None and anatomical_frame(dvr_gl.Volume(DATA)) is None
+    v = dvr_gl.Volume(DATA, orientation="lpi")
+    assert v.orientation == "LPI"
+    front, up = anatomical_frame(v)
+    assert front.tolist() == [0, -1, 0] and up.tolist() == [0, 0, -1]
+    assert v.digest() == dvr_gl.Volume(DATA).digest()   # it changes no image, only the first view

@@ -28,6 +28,7 @@ import pytest
 from PIL import Image
 
 import dvr_gl
+from dvr_gl.inputs import first_camera
 import dvr_gl.techniques.raycast
 from dvr_gl import cli, data, transfer
 from dvr_gl import io as dvr_io
@@ -109,7 +110,7 @@ def open_viewer(display):
 
 
 def head_viewer(open_viewer, *extra):
-    return open_viewer("builtin:ct_head", "--elevation", "90", "--size", SIZE, *extra)
+    return open_viewer("builtin:ct_head", "--azimuth", "0", "--elevation", "90", "--size", SIZE, *extra)
 
 
 def drag(v, start, end, button=MOUSE_LEFT, mods=0, steps=4):
@@ -377,16 +378,21 @@ def test_mode_switching_and_iso(open_viewer, renderer, tmp_path):
     v.refine()
     press(v, "s")
     assert_matches_headless(v, renderer, png(tmp_path / "m.png"))
-    # shading: isosurfaces are shaded anyway; l lights composite samples
+    # shading: isosurfaces are shaded anyway; composite samples are lit from the start,
+    # l switches it off and on
     press(v, "m")
-    assert v.mode == "composite"
+    assert v.mode == "composite" and v.render_arguments()[0].shading
     press(v, "l")
-    assert v.shading and v.render_arguments()[0].shading
+    assert v.messages[-1] == "shading off" and not v.render_arguments()[0].shading
+    press(v, "l")
+    assert v.messages[-1] == "shading on" and v.render_arguments()[0].shading
     v.refine()
     press(v, "s")
     assert_matches_headless(v, renderer, png(tmp_path / "m.png"))
-    press(v, "m")                                      # mip, minip, average have no lit samples
-    assert v.mode == "isosurface" and "raycast cannot render mip, minip, average lit" in v.messages[-1]
+    press(v, "m")                                      # mip has no lit samples: unlit there
+    assert v.mode == "mip" and not v.render_arguments()[0].shading
+    press(v, "l")
+    assert "cannot switch shading: raycast in mode mip" in v.messages[-1]
 
 
 def test_lit_start_with_lights_and_gradient_texture(open_viewer, renderer, tmp_path):
@@ -407,7 +413,7 @@ def test_lit_start_with_lights_and_gradient_texture(open_viewer, renderer, tmp_p
     v.refine()
     assert v.render_image()[..., :3].max() == 0 and v.render_image()[..., 3].max() > 0.1
     press(v, "l")
-    assert "cannot switch shading" in v.messages[-1] and "nothing to light" in v.messages[-1]
+    assert "cannot switch shading" in v.messages[-1] and "absorption does not light samples" in v.messages[-1]
     for model in ("emission", "sabella", "emission_absorption"):
         press(v, "x")
         assert v.optical_model == model
@@ -742,7 +748,8 @@ def test_frames_screenshot_under_xvfb_run(display, renderer, tmp_path):
     assert shot[64, 64, 3] > 0 and shot[0, 0, 3] == 0
     # the same picture dvr-gl render makes of it (default auto TF and camera)
     volume = dvr_io.load_volume(str(tmp_path / "head.npy"))
-    scene = dvr_gl.Scene(volume, transfer.auto_preset(volume), dvr_gl.default_camera(volume), width=128, height=128)
+    scene = dvr_gl.Scene(volume, transfer.auto_preset(volume), first_camera(volume), width=128, height=128,
+                         shading=True)    # lit from the start, as render
     headless = dvr_io.to_png_array(renderer.render(scene))
     plan = dvr_gl.techniques.raycast.make_plan(scene)
     assert np.abs(shot.astype(int) - headless).max() <= 1 + math.ceil(255 * derived_tolerance(plan))
@@ -961,7 +968,7 @@ def test_mesh_orbit_sort_and_modes(mesh_viewer):
     press(v, "p")
     assert "tetra has no preintegrate option" in v.messages[-1]
     press(v, "l")                                      # tetra does not light samples: refused
-    assert not v.shading and "cannot switch shading: tetra does not light samples yet" in v.messages[-1]
+    assert not v.lit and "cannot switch shading: tetra in mode composite" in v.messages[-1]
     for number in range(1, len(v.presets()) + 1):       # every preset, or a message
         press(v, str(number))
         v.refine()
