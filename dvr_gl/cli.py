@@ -429,7 +429,8 @@ def cmd_info_file(args, out=None):
     values = data.scalars if mesh else data.data
     print("histogram  " + text_histogram(values) + f"  ({data.data_range[0]:g} to {data.data_range[1]:g}, "
           "32 bins, height ~ log count)", file=out)
-    print(f"preset     {_describe_tf(preset, PRESETS[preset](data))} (what render uses without --tf)", file=out)
+    name = preset if preset != "auto" else f"auto: {auto_preset_name(data)}"
+    print(f"preset     {_describe_tf(name, PRESETS[preset](data))} (what render uses without --tf)", file=out)
     return 0
 
 
@@ -496,6 +497,11 @@ def _check_technique(name):
         return
     if name not in names():
         raise UsageError("--technique", f"must be one of {', '.join(names())}, got {name!r}")
+
+
+def auto_preset_name(data):
+    from .transfer import auto_preset_name as name
+    return name(data)
 
 
 def _describe_tf(name, tf):

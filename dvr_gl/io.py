@@ -22,6 +22,10 @@
   or ``>u2`` for big endian) and ``spacing``; a name ending in ``.gz`` is gunzipped
   first. A name in the Open SciVis convention, ``name_XxYxZ_dtype.raw`` (such as
   ``neghip_66x66x66_uint8.raw``), gives the shape and dtype itself, and spacing 1.
+- a DICOM series -- a folder, or one ``.dcm`` file of it -- through pydicom
+  (``pip install "dvr-gl[io]"``): see :func:`_load_dicom_series`; CT comes out in HU and
+  the volume's ``orientation`` is the patient's.
+- ``.tif`` / ``.tiff`` -- a multi-page TIFF stack through tifffile, one page per slice.
 - ``.vti`` (VTK XML image data), legacy ``.vtk`` with ``DATASET STRUCTURED_POINTS`` and
   ``.slc`` -- through VTK's own readers (``pip install "dvr-gl[io]"``): the point
   scalars (or the first point array), spacing and origin from the file.
@@ -205,6 +209,15 @@ def _named_errors(read):
 
 def load_volume(path, shape=None, dtype=None, spacing=None, origin=None, mask_nonfinite=False) -> Volume:
     """Read a volume file (see the module docstring for formats); returns a Volume."""
+    if _is_dicom_path(path):
+        data, file_spacing, file_origin, orientation = _load_dicom_series(os.fspath(path))
+        if shape is not None and tuple(data.shape) != _triplet(shape, "shape", kind=int, positive=True):
+            raise InputError("shape", f"{os.fspath(path)!r} holds shape {tuple(data.shape)} (nz, ny, nx), "
+                                      f"not the {shape} given")
+        return Volume(_volume_dtype(data, os.fspath(path)),
+                      spacing=file_spacing if spacing is None else _triplet(spacing, "spacing", positive=True),
+                      origin=file_origin if origin is None else _triplet(origin, "origin"),
+                      mask_nonfinite=mask_nonfinite, orientation=orientation)
     path = _existing_file(path, "volume")
     if spacing is not None:
         spacing = _triplet(spacing, "spacing", positive=True)
@@ -243,6 +256,13 @@ def load_volume(path, shape=None, dtype=None, spacing=None, origin=None, mask_no
                                       f"not the {shape} given")
         spacing = spacing if spacing is not None else file_spacing
         origin = origin if origin is not None else file_origin
+    elif lower.endswith((".tif", ".tiff")):
+        data, file_spacing = _load_tiff(path)
+        if shape is not None and tuple(data.shape) != shape:
+            raise InputError("shape", f"{path!r} holds shape {tuple(data.shape)} (nz, ny, nx), "
+                                      f"not the {shape} given")
+        spacing = spacing if spacing is not None else file_spacing
+        origin = origin if origin is not None else (0.0, 0.0, 0.0)
     elif lower.endswith((".vti", ".slc", ".vtk")):
         data, file_spacing, file_origin = _load_vtk_image(path)
         spacing = spacing if spacing is not None else file_spacing
@@ -266,7 +286,8 @@ def load_volume(path, shape=None, dtype=None, spacing=None, origin=None, mask_no
     return Volume(data, spacing=spacing, origin=origin, mask_nonfinite=mask_nonfinite, orientation=orientation)
 
 
-SUPPORTED_VOLUMES = (".npy, .npz, .nrrd/.nhdr, .mhd/.mha, .nii/.nii.gz (with nibabel), .vti, .slc and "
+SUPPORTED_VOLUMES = (".npy, .npz, .nrrd/.nhdr, .mhd/.mha, .nii/.nii.gz (with nibabel), a DICOM series (a folder, or "
+                     "one .dcm of it; with pydicom), a TIFF stack (.tif/.tiff; with tifffile), .vti, .slc and "
                      "structured-points .vtk (with VTK), and raw samples "
                      "(.raw, .raw.gz, .bin, .dat, or no extension; with shape, dtype and spacing unless the "
                      "name is name_XxYxZ_dtype.raw); meshes: .vtu, legacy .vtk and what meshio reads")
@@ -351,6 +372,134 @@ def _load_nifti(path):
     origin = tuple(float(v) for v in affine[:3, 3])
     orientation = "".join(nibabel.aff2axcodes(affine))   # where the index axes point
     return np.ascontiguousarray(np.transpose(data, (2, 1, 0))), zooms, origin, orientation
+
+
+def _optional(module, what):
+    """Import an optional reader, or an InputError saying what to install."""
+    import importlib
+    try:
+        return importlib.import_module(module)
+    except ImportError:
+        raise InputError("path", f"{what} needs {module}: pip install \"dvr-gl[io]\" (or pip install "
+                                 f"{module})") from None
+
+
+def _is_dicom_path(path):
+    """A folder (a DICOM series) or a ``.dcm`` file."""
+    try:
+        path = os.fspath(path)
+    except TypeError:
+        return False
+    return os.path.isdir(path) or path.lower().endswith(".dcm")
+
+
+# DICOM's patient axes: +x towards the patient's left, +y posterior, +z superior (LPS).
+_LPS = "LPS"
+
+
+def _axis_code(vector):
+    """The anatomical letter a direction in DICOM patient space points to (its largest
+    component, with its sign)."""
+    axis = int(np.argmax(np.abs(vector)))
+    return _LPS[axis] if vector[axis] > 0 else _OPPOSITE[_LPS[axis]]
+
+
+@_named_errors
+def _load_dicom_series(path):
+    """(data (nz, ny, nx), spacing, origin, orientation) of a DICOM series, through
+    pydicom: every file of ``path`` (a folder; or the folder of a ``.dcm`` file, keeping
+    that file's series) of one SeriesInstanceUID, sorted along the slice normal by
+    ImagePositionPatient, with RescaleSlope and RescaleIntercept applied (CT in HU).
+    Columns run along the first ImageOrientationPatient vector (x), rows along the second
+    (y), slices along their cross product (z); spacing from PixelSpacing and the slice
+    positions; orientation from those vectors in DICOM's LPS patient axes."""
+    if not os.path.exists(path):
+        raise MissingFileError("path", f"no such file or folder {path!r}")
+    pydicom = _optional("pydicom", f"the DICOM series {path!r}")
+    folder = path if os.path.isdir(path) else (os.path.dirname(path) or ".")
+    want = None if os.path.isdir(path) else pydicom.dcmread(path, stop_before_pixels=True).get("SeriesInstanceUID")
+    slices, other_series = [], set()
+    for name in sorted(os.listdir(folder)):
+        full = os.path.join(folder, name)
+        if not os.path.isfile(full):
+            continue
+        try:
+            ds = pydicom.dcmread(full, stop_before_pixels=True)
+        except pydicom.errors.InvalidDicomError:
+            continue                                  # not DICOM: a README, a DICOMDIR's siblings
+        if "ImagePositionPatient" not in ds or "Rows" not in ds:
+            continue
+        uid = ds.get("SeriesInstanceUID")
+        want = uid if want is None else want
+        if uid != want:
+            other_series.add(uid)
+            continue
+        slices.append((full, ds))
+    if len(slices) < 2:
+        where = "is a folder; read as a DICOM series, it holds" if os.path.isdir(path) else "is in a series of"
+        raise InputError("path", f"{path!r} {where} {len(slices)} image slices (a DICOM series needs at least 2)")
+    if other_series:
+        warnings.warn(f"{path}: {len(other_series)} other series in the folder are left out; reading "
+                      f"SeriesInstanceUID {want}", stacklevel=4)
+    iop = np.array(slices[0][1].ImageOrientationPatient, np.float64)
+    for full, ds in slices:
+        if not np.allclose(np.array(ds.ImageOrientationPatient, np.float64), iop, atol=1e-4):
+            raise InputError("ImageOrientationPatient", f"{full!r}: the slices of one series must share "
+                                                        f"their orientation, got {list(ds.ImageOrientationPatient)}")
+    row, col = iop[:3], iop[3:]
+    normal = np.cross(row, col)
+    where = np.array([np.array(ds.ImagePositionPatient, np.float64) @ normal for _, ds in slices])
+    order = np.argsort(where, kind="stable")
+    gaps = np.diff(where[order])
+    if np.any(gaps <= 0):
+        raise InputError("ImagePositionPatient", f"{path!r}: two slices share a position along the normal")
+    dz = float(np.median(gaps))
+    if np.any(np.abs(gaps - dz) > 0.01 * dz):
+        warnings.warn(f"{path}: slice distances vary from {gaps.min():g} to {gaps.max():g}; using their "
+                      f"median {dz:g}", stacklevel=4)
+    first = slices[order[0]][1]
+    dy, dx = (float(v) for v in first.PixelSpacing)   # between rows, between columns
+    planes = []
+    for k in order:
+        ds = pydicom.dcmread(slices[k][0])
+        try:
+            pixels = ds.pixel_array
+        except Exception as e:            # a compressed transfer syntax without its handler
+            raise InputError("path", f"{slices[k][0]!r}: cannot decode its pixels ({e})") from None
+        slope, intercept = float(ds.get("RescaleSlope", 1)), float(ds.get("RescaleIntercept", 0))
+        planes.append(pixels * slope + intercept if (slope, intercept) != (1.0, 0.0) else pixels)
+    data = np.stack(planes)
+    if data.dtype.kind == "f" and np.all(data == np.round(data)) and -32768 <= data.min() and data.max() <= 32767:
+        data = data.astype(np.int16)      # integer HU: keep them exact and small
+    orientation = _axis_code(row) + _axis_code(col) + _axis_code(normal)
+    if len(set(orientation)) != 3 or {_OPPOSITE[c] for c in orientation} & set(orientation):
+        orientation = None
+    origin = tuple(float(v) for v in first.ImagePositionPatient)
+    return np.ascontiguousarray(data), (dx, dy, dz), origin, orientation
+
+
+@_named_errors
+def _load_tiff(path):
+    """(data (nz, ny, nx), spacing) of a multi-page TIFF stack, through tifffile: one page
+    per slice; x and y spacing from the resolution tags (1 / pixels per unit) and z from
+    ImageJ's ``spacing``, each 1 where the file says nothing."""
+    tifffile = _optional("tifffile", f"the TIFF stack {path!r}")
+    with tifffile.TiffFile(path) as tif:
+        data = tif.asarray()
+        page = tif.pages[0]
+        spacing = [1.0, 1.0, 1.0]
+        for axis, tag in ((0, "XResolution"), (1, "YResolution")):
+            if tag in page.tags:
+                num, den = page.tags[tag].value
+                if num > 0 and den > 0 and not (num == 1 and den == 1):
+                    spacing[axis] = den / num
+        meta = tif.imagej_metadata or {}
+        if float(meta.get("spacing", 0) or 0) > 0:
+            spacing[2] = float(meta["spacing"])
+    if data.ndim != 3:
+        raise InputError("path", f"{path!r} holds an image of shape {data.shape}; a TIFF stack for a volume "
+                                 "has one grey page per slice (pages, rows, columns)")
+    return np.ascontiguousarray(data), tuple(spacing)
 
 
 def _volume_dtype(data, path):

@@ -612,7 +612,7 @@ def test_info_file_shows_a_histogram_and_the_preset(tiny, tiny_mesh, capsys):
     code, out, err = _run(["info", d / "tiny.npy"], capsys)
     assert code == 0, err
     lines = {line.split()[0]: line for line in out.splitlines() if line.strip()}
-    assert "32 bins" in lines["histogram"] and lines["preset"].startswith("preset     auto (")
+    assert "32 bins" in lines["histogram"] and lines["preset"].startswith("preset     auto: warm ramp (")
     dm, _ = tiny_mesh
     code, out, err = _run(["info", dm / "tiny.vtu"], capsys)
     assert code == 0 and "histogram" in out and "preset" in out, err

@@ -196,7 +196,7 @@ def test_missing_file(tmp_path):
         load_volume(tmp_path / "nope.npy")
     assert isinstance(e.value, FileNotFoundError) and isinstance(e.value, ValueError)
     assert e.value.field == "path" and "nope.npy" in str(e.value)
-    with pytest.raises(InputError, match="directory"):
+    with pytest.raises(InputError, match="is a folder; read as a DICOM series, it holds 0 image slices"):
         load_volume(tmp_path)
 
 
@@ -723,11 +723,12 @@ def test_shared_mri_loads():
 
 
 def test_a_format_dvr_gl_does_not_read_is_named_with_the_ones_it_does(tmp_path):
-    p = tmp_path / "image.tif"
-    p.write_bytes(b"II*\x00")
+    p = tmp_path / "image.png"
+    p.write_bytes(b"\x89PNG\r\n")
     with pytest.raises(InputError) as e:
         load_volume(p)
-    assert e.value.field == "path" and ".tif" in str(e.value) and ".nrrd" in str(e.value) and ".nii" in str(e.value)
+    assert e.value.field == "path" and ".png" in str(e.value) and ".nrrd" in str(e.value) and ".nii" in str(e.value)
+    assert "DICOM" in str(e.value) and ".tif" in str(e.value)
 
 
 def test_vtk_image_data_through_vtk():
@@ -760,3 +761,78 @@ def test_vtk_image_data_written_here(tmp_path):
     writer.Write()
     v = load_volume(tmp_path / "a.vti")
     assert np.array_equal(v.data, a) and v.spacing.tolist() == [0.5, 1, 2] and v.origin.tolist() == [1, -2, 3]
+
+
+def _write_dicom_series(folder, volume_hu, spacing=(0.7, 0.8), thickness=2.5, series="1.2.3.4", shuffle=True,
+                        row=(1, 0, 0), col=(0, 1, 0), prefix="im"):
+    """A CT series of (nz, ny, nx) HU values as one file per slice, stored as unsigned
+    values with RescaleIntercept -1024, written in a scrambled order."""
+    pydicom = pytest.importorskip("pydicom")
+    from pydicom.dataset import FileDataset, FileMetaDataset
+    from pydicom.uid import CTImageStorage, ExplicitVRLittleEndian, generate_uid
+    folder.mkdir(parents=True, exist_ok=True)
+    normal = np.cross(row, col)
+    order = np.random.default_rng(5).permutation(len(volume_hu)) if shuffle else range(len(volume_hu))
+    for n, k in enumerate(order):
+        meta = FileMetaDataset()
+        meta.MediaStorageSOPClassUID = CTImageStorage
+        meta.MediaStorageSOPInstanceUID = generate_uid()
+        meta.TransferSyntaxUID = ExplicitVRLittleEndian
+        ds = FileDataset(str(folder / f"{prefix}{n:03d}.dcm"), {}, file_meta=meta, preamble=b"\0" * 128)
+        ds.SOPClassUID = CTImageStorage
+        ds.SeriesInstanceUID = series
+        ds.Modality = "CT"
+        ds.Rows, ds.Columns = volume_hu.shape[1:]
+        ds.PixelSpacing = [spacing[1], spacing[0]]
+        ds.ImageOrientationPatient = [*row, *col]
+        ds.ImagePositionPatient = list(np.array([-100.0, -120.0, 30.0]) + k * thickness * normal)
+        ds.SamplesPerPixel = 1
+        ds.PhotometricInterpretation = "MONOCHROME2"
+        ds.BitsAllocated, ds.BitsStored, ds.HighBit, ds.PixelRepresentation = 16, 16, 15, 0
+        ds.RescaleSlope, ds.RescaleIntercept = 1, -1024
+        ds.PixelData = (volume_hu[k] + 1024).astype("<u2").tobytes()
+        ds.save_as(str(folder / f"{prefix}{n:03d}.dcm"), enforce_file_format=True)
+    return pydicom
+
+
+def test_dicom_series_sorted_rescaled_and_oriented(tmp_path):
+    hu = np.random.default_rng(3).integers(-1000, 2000, (5, 6, 7)).astype(np.int16)
+    _write_dicom_series(tmp_path / "ct", hu)
+    (tmp_path / "ct" / "notes.txt").write_text("not DICOM")
+    v = load_volume(tmp_path / "ct")
+    assert v.data.dtype == np.int16 and np.array_equal(v.data, hu)       # sorted by position, in HU
+    assert np.allclose(v.spacing, [0.7, 0.8, 2.5]) and np.allclose(v.origin, [-100, -120, 30])
+    assert v.orientation == "LPS"                                       # DICOM's patient axes
+    one = load_volume(tmp_path / "ct" / "im002.dcm")                    # one file: its whole series
+    assert np.array_equal(one.data, hu)
+    # another series in the folder is left out, with a warning
+    _write_dicom_series(tmp_path / "ct", hu[:2], series="9.9.9", shuffle=False, prefix="other")
+    with pytest.warns(UserWarning, match="other series"):
+        assert np.array_equal(load_volume(tmp_path / "ct" / "im002.dcm").data, hu)
+    with pytest.warns(UserWarning, match="other series"):
+        assert load_volume(tmp_path / "ct" / "other001.dcm").shape == (2, 6, 7)
+
+
+def test_dicom_series_flipped_axes_and_errors(tmp_path):
+    hu = np.zeros((3, 4, 5), np.int16)
+    _write_dicom_series(tmp_path / "flip", hu, row=(-1, 0, 0), col=(0, 0, -1))
+    assert load_volume(tmp_path / "flip").orientation == "RIA"     # normal = row x col points anterior
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(InputError, match="holds 0 image slices"):
+        load_volume(tmp_path / "empty")
+    with pytest.raises(MissingFileError):
+        load_volume(tmp_path / "nowhere.dcm")
+
+
+def test_tiff_stack(tmp_path):
+    tifffile = pytest.importorskip("tifffile")
+    a = np.random.default_rng(4).integers(0, 60000, (4, 5, 6)).astype(np.uint16)
+    tifffile.imwrite(tmp_path / "stack.tif", a, imagej=True, resolution=(1 / 0.5, 1 / 0.25),
+                     metadata={"spacing": 2.0, "unit": "um"})
+    v = load_volume(tmp_path / "stack.tif")
+    assert np.array_equal(v.data, a) and np.allclose(v.spacing, [0.5, 0.25, 2.0])
+    tifffile.imwrite(tmp_path / "plain.tiff", a, photometric="minisblack")
+    assert np.allclose(load_volume(tmp_path / "plain.tiff").spacing, [1, 1, 1])
+    tifffile.imwrite(tmp_path / "flat.tif", a[0])
+    with pytest.raises(InputError, match="one grey page per slice"):
+        load_volume(tmp_path / "flat.tif")
