@@ -198,8 +198,9 @@ def add_render_options(r):
                    help="vertical field of view (default: 30)")
     r.add_argument("--ortho", action="store_true", help="orthographic instead of perspective projection")
     r.add_argument("--background", type=_background, metavar="R,G,B",
-                   help="composite over this colour (components in [0, 1]) and write RGB; "
-                        "default: write un-premultiplied RGBA")
+                   help="composite over this colour (components in [0, 1]); render: default white "
+                        "(black for --optical-model emission), RGB unless --transparent; view: the "
+                        "window's first background, screenshots RGBA unless given")
     raw = r.add_argument_group("raw and overriding geometry")
     raw.add_argument("--shape", type=_shape, metavar="NZ,NY,NX", help="sample counts of a raw file, z slowest")
     raw.add_argument("--dtype", metavar="D", help="sample type of a raw file: uint8, int16, <f4, >u2, ...")
@@ -321,6 +322,8 @@ def build_parser(bench_module=None):
                     "tets, or any other format meshio reads; rendered with --technique tetra) or a "
                     "bundled data set: builtin:ct_head, builtin:synthetic.")
     r.add_argument("--out", "-o", required=True, metavar="IMAGE.png", help="the PNG to write")
+    r.add_argument("--transparent", action="store_true",
+                   help="write un-premultiplied RGBA instead of RGB over the background")
     add_render_options(r)
 
     d = sub.add_parser("demo", help="render the bundled demo scenes to PNGs",
@@ -573,8 +576,11 @@ def cmd_render(args, out=None):
         if not optical:
             raise
         raise UsageError("--optical-model", str(e)) from None
-    if args.optical_model == "emission" and args.background is None:
-        args.background = (0.0, 0.0, 0.0)    # nothing absorbs: A = 0, the light shows over a background
+    if getattr(args, "transparent", False):
+        if args.background is not None:
+            raise UsageError("--transparent", "writes RGBA; it takes no --background")
+    elif args.background is None:       # the picture as it is seen: over white, a glow over black
+        args.background = (0.0, 0.0, 0.0) if args.optical_model == "emission" else (1.0, 1.0, 1.0)
     t_load = time.perf_counter() - t0
 
     import dvr_gl

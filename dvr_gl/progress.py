@@ -1,49 +1,36 @@
-"""A text progress bar for long jobs (benchmarks, particle generation)."""
+"""Progress bars for long jobs (exact images, tiles, benchmarks, particle generation),
+through tqdm, behind the small interface the callers share."""
 
 from __future__ import annotations
 
 import sys
-import time
 
 
 class Progress:
-    """A one-line text progress bar on stderr (one line per update when not a terminal)."""
+    """A tqdm bar on stderr (or ``stream``): ``begin(label)`` says what is being done now,
+    ``advance(label)`` counts one more done, ``close()`` ends the bar. Off a terminal tqdm
+    redraws at most every few seconds, so logs stay short."""
 
-    def __init__(self, total, stream=None, width=30):
+    def __init__(self, total, stream=None, width=None):
+        from tqdm import tqdm
+        stream = stream if stream is not None else sys.stderr
+        tty = hasattr(stream, "isatty") and stream.isatty()
         self.total = max(1, int(total))
         self.done = 0
-        self.stream = stream if stream is not None else sys.stderr
-        self.width = width
-        self.start = time.perf_counter()
-        self.tty = hasattr(self.stream, "isatty") and self.stream.isatty()
-
-    def _line(self, label):
-        frac = self.done / self.total
-        filled = int(round(frac * self.width))
-        elapsed = time.perf_counter() - self.start
-        return (f"[{'#' * filled}{'.' * (self.width - filled)}] {self.done}/{self.total} "
-                f"{elapsed:6.1f}s  {label}")
+        self.bar = tqdm(total=self.total, file=stream, ncols=width, mininterval=0.1 if tty else 5.0,
+                        bar_format="{desc}: {percentage:3.0f}%|{bar:20}| {n_fmt}/{total_fmt} "
+                                   "[{elapsed}<{remaining}]", dynamic_ncols=width is None and tty)
 
     def begin(self, label):
         """Show what is being done now (before it is done)."""
-        if self.tty:
-            self.stream.write("\r\033[K" + self._line(label))
-            self.stream.flush()
+        self.bar.set_description_str(label, refresh=True)
 
     def advance(self, label=""):
-        """One more done. Off a terminal, a line is written only when the label's part
-        before its colon changes, and at the end."""
+        """One more done."""
         self.done += 1
-        if self.tty:
-            self.stream.write("\r\033[K" + self._line(label))
-        else:
-            group = label.split(":")[0]
-            if group != getattr(self, "_group", None) or self.done == self.total:
-                self._group = group
-                self.stream.write(self._line(label) + "\n")
-        self.stream.flush()
+        if label:
+            self.bar.set_description_str(label, refresh=False)
+        self.bar.update(1)
 
     def close(self):
-        if self.tty:
-            self.stream.write("\n")
-            self.stream.flush()
+        self.bar.close()

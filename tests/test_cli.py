@@ -39,8 +39,15 @@ def _png(path):
         return im.mode, np.array(im)
 
 
-def _run(argv, capsys):
-    code = cli.main([str(a) for a in argv])
+def _run(argv, capsys, rgba=True):
+    """Run the command line. Renders write RGB over white by default; with ``rgba`` (the
+    default here) a render without --background asks for --transparent, so that tests
+    compare the un-premultiplied RGBA (the default itself is tested on its own)."""
+    argv = [str(a) for a in argv]
+    if rgba and argv[:1] == ["render"] and "--background" not in argv and "--transparent" not in argv \
+            and any(a in ("--out", "-o") for a in argv):
+        argv.append("--transparent")
+    code = cli.main(argv)
     out, err = capsys.readouterr()
     return code, out, err
 
@@ -50,14 +57,18 @@ def _run(argv, capsys):
 def test_render_npy_writes_what_the_library_renders(renderer, tiny, capsys):
     d, a = tiny
     out = d / "tiny.png"
-    code, stdout, err = _run(["render", d / "tiny.npy", "--size", "32x32", "--out", out], capsys)
+    code, stdout, err = _run(["render", d / "tiny.npy", "--size", "32x32", "--out", out], capsys, rgba=False)
     assert code == 0, err
     mode, px = _png(out)
-    assert mode == "RGBA" and px.shape == (32, 32, 4)
-    assert px[..., 3].max() > 0 and px[0, 0, 3] == 0  # something drawn, corner empty
+    assert mode == "RGB" and px.shape == (32, 32, 3)           # over white by default
+    assert px.min() < 200 and px[0, 0].tolist() == [255, 255, 255]  # something drawn, corner white
     vol = load_volume(d / "tiny.npy")
     scene = dvr_gl.Scene(vol, auto_preset(vol), first_camera(vol), 32, 32, shading=True)   # lit by default
-    assert np.array_equal(px, to_png_array(renderer.render(scene)))
+    image = renderer.render(scene)
+    assert np.array_equal(px, to_png_array(image, (1.0, 1.0, 1.0)))
+    assert "(RGB over background)" in stdout
+    code, _, err = _run(["render", d / "tiny.npy", "--size", "32x32", "--transparent", "--out", out], capsys)
+    assert code == 0 and np.array_equal(_png(out)[1], to_png_array(image)), err
     assert "32x32" in stdout and "raycast" in stdout and "wrote" in stdout and "first frame" in stdout
     assert sorted(os.listdir(d)) == ["tiny.npy", "tiny.png", "tiny.raw"]  # no temporary left
 
@@ -670,19 +681,20 @@ def test_shading_bench_quick_run(tmp_path, capsys):
 
 
 def test_render_optical_models(renderer, tiny, capsys):
-    """--optical-model absorption writes (0, A); emission writes its light over black
-    unless --background says otherwise."""
+    """--optical-model absorption writes (0, A) over white; emission writes its light over
+    black unless --background says otherwise."""
     d, _ = tiny
     vol = load_volume(d / "tiny.npy")
     scene = dvr_gl.Scene(vol, auto_preset(vol), first_camera(vol), 32, 32)
-    for model, background in (("absorption", None), ("emission", (0.0, 0.0, 0.0)), ("sabella", None)):
+    for model, background in (("absorption", (1.0, 1.0, 1.0)), ("emission", (0.0, 0.0, 0.0)),
+                              ("sabella", (1.0, 1.0, 1.0))):
         out = d / f"{model}.png"
         code, stdout, err = _run(["render", d / "tiny.npy", "--size", "32x32", "--optical-model", model,
-                                  "--out", out], capsys)
+                                  "--out", out], capsys, rgba=False)
         assert code == 0, err
         image = renderer.render(scene.replace(optical_model=model, shading=model == "emission"))
         assert np.array_equal(_png(out)[1], to_png_array(image, background))
-        assert ("RGB over background" in stdout) == (background is not None)
+        assert "RGB over background" in stdout
 
 
 def test_render_illustration(renderer, tiny, capsys):

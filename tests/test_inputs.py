@@ -108,11 +108,12 @@ def test_every_shared_file_renders_in_colour_with_no_options(tmp_path, capsys):
         assert cli.main(["render", path, "-o", str(out), "--size", "48x48"]) == 0, path
         stdout = capsys.readouterr().out
         with Image.open(out) as im:
-            px = np.asarray(im.convert("RGBA")).astype(int)
-        drawn = px[..., 3] > 20
-        assert drawn.mean() > 0.05, path
-        spread = (px[..., :3].max(axis=-1) - px[..., :3].min(axis=-1))[drawn]
-        assert np.median(spread) > 20, f"{path}: grey"
+            assert im.mode == "RGB", path                # over white by default
+            px = np.asarray(im).astype(int)
+        assert (px.min(axis=-1) < 235).mean() > 0.05, path
+        solid = px.min(axis=-1) < 200          # faint haze over white is pale whatever its hue
+        spread = (px.max(axis=-1) - px.min(axis=-1))[solid]
+        assert solid.any() and np.percentile(spread, 75) > 25, f"{path}: grey"
         assert ("rendered   tetra" in stdout) or (", lit," in stdout), path
 
 

@@ -857,7 +857,9 @@ def _render(scene):
     t0, t1 = ray_box(o, d, lo, hi)
     out = np.zeros((W * H, 4))
     hit = np.flatnonzero(t1 > t0)
-    for c0 in range(0, hit.size, _CHUNK):
+    chunks = range(0, hit.size, _CHUNK)
+    progress = _progress(len(chunks), scene)
+    for c0 in chunks:
         r = hit[c0:c0 + _CHUNK]
         args = (o[r], d[r], t0[r], t1[r])
         mode = scene.mode
@@ -878,9 +880,21 @@ def _render(scene):
                 out[rr, 3] = 1.0
         else:  # pragma: no cover - Scene validates the mode
             raise ValueError(f"unknown mode {mode!r}")
+        if progress is not None:
+            progress.advance(f"exact image {W}x{H}")
+    if progress is not None:
+        progress.close()
     if not np.all(np.isfinite(out)):
         raise FloatingPointError("exact: non-finite pixel values (a bug in the integrator)")
     return out.reshape(H, W, 4)
+
+
+def _progress(steps, scene):
+    """A progress bar for exact images of more than a few blocks of rays (seconds)."""
+    if steps < 4:
+        return None
+    from ..progress import Progress
+    return Progress(steps)
 
 
 def _render_mesh(scene):
@@ -891,7 +905,11 @@ def _render_mesh(scene):
     out = np.zeros((W * H, 4))
     mode = scene.mode
     d = None
-    for r0, r1 in rays.row_blocks(_MESH_BUDGET):
+    blocks = list(rays.row_blocks(_MESH_BUDGET))
+    progress = _progress(len(blocks), scene)
+    for r0, r1 in blocks:
+        if progress is not None:
+            progress.advance(f"exact image {W}x{H}")
         seg = union_segments(rays.segments(r0, r1))
         if seg["pixel"].size == 0:
             continue
@@ -913,6 +931,8 @@ def _render_mesh(scene):
                 out[pix[got], 3] = 1.0
         else:  # pragma: no cover - Scene validates the mode
             raise ValueError(f"unknown mode {mode!r}")
+    if progress is not None:
+        progress.close()
     if not np.all(np.isfinite(out)):
         raise FloatingPointError("exact: non-finite pixel values (a bug in the integrator)")
     return out.reshape(H, W, 4)
