@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import math
 import os
 import platform
 import sys
@@ -27,269 +26,13 @@ import time
 
 from . import io as dvr_io
 from .inputs import PRESETS  # presets and bundled data sets are shared with the viewer and dvr_gl.render
-from .scene import MODES
-
-SORTS = ("mpvo", "centroid")  # dvr_gl.techniques.tetra's orders (imported lazily there)
+from .options import (MESH_TECHNIQUES, OPTION_OF_FIELD, UsageError, _check_input_options, _origin, _shape,
+                      _spacing, add_render_options, check_png, check_technique, input_is_mesh, load_input_args,
+                      resolve_tf_option, technique_options)
 
 PROG = "dvr-gl"
 
-# Which command-line option an InputError's field stands for.
-_OPTION_OF_FIELD = {"path": "INPUT", "shape": "--shape", "dtype": "--dtype", "spacing": "--spacing",
-                    "origin": "--origin", "size": "--size", "background": "--background",
-                    "scalars": "--scalars", "tf": "--tf"}
-
-
-class UsageError(Exception):
-    """Bad input found after parsing: ``option`` names it, the message says why."""
-
-    def __init__(self, option, message):
-        self.option = option
-        super().__init__(f"{option}: {message}")
-
-
-# ----------------------------------------------------------------------------- argument types
-
-def _arg_type(func, name):
-    def convert(text):
-        try:
-            return func(text)
-        except dvr_io.InputError as e:
-            raise argparse.ArgumentTypeError(e.detail) from None
-    convert.__name__ = name
-    return convert
-
-
-def _finite(text, positive=False):
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f"must be finite, got {text!r}")
-    if positive and value <= 0:
-        raise argparse.ArgumentTypeError(f"must be positive, got {text!r}")
-    return value
-
-
-def _number(text):
-    return _finite(text)
-
-
-def _count(text):
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a whole number, got {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"must be 0 or more, got {value}")
-    return value
-
-
-def _positive(text):
-    return _finite(text, positive=True)
-
-
-_size = _arg_type(dvr_io.parse_size, "size")
-_shape = _arg_type(lambda t: dvr_io.parse_triplet(t, "shape", kind=int, positive=True), "shape")
-_spacing = _arg_type(lambda t: dvr_io.parse_triplet(t, "spacing", positive=True), "spacing")
-_origin = _arg_type(lambda t: dvr_io.parse_triplet(t, "origin"), "origin")
-
-
-def _background_value(text):
-    rgb = dvr_io.parse_triplet(text, "background")
-    if not all(0 <= v <= 1 for v in rgb):
-        raise dvr_io.InputError("background", f"components must lie in [0, 1] (1,1,1 is white), got {text!r}")
-    return rgb
-
-
-_background = _arg_type(_background_value, "background")
-
-
-def _illustration(text):
-    from .scene import ILLUSTRATION_TERMS
-    names = [t.strip() for t in text.split(",") if t.strip()]
-    unknown = [n for n in names if n not in ILLUSTRATION_TERMS]
-    if not names or unknown:
-        raise argparse.ArgumentTypeError(f"terms are {', '.join(ILLUSTRATION_TERMS)}, got {text!r}")
-    return tuple(names)
-
-
-def _light(text):
-    from .inputs import parse_light
-    return _arg_type(parse_light, "light")(text)
-
-
 # ----------------------------------------------------------------------------- the parser
-
-def add_render_options(r):
-    """The options shared by ``render`` and ``view``: the input, its geometry, the transfer
-    function, the technique and its options, the mode, the camera and the image size."""
-    r.add_argument("input", metavar="INPUT", help="volume file, mesh file (.vtu, .vtk, .npz with points "
-                                                  "and tets, ...) or builtin:NAME")
-    r.add_argument("--tf", metavar="PRESET|FILE.json",
-                   help=f"transfer function: a preset ({', '.join(PRESETS)}) or a JSON file "
-                        "{\"color\": [[s, r, g, b], ...], \"opacity\": [[s, a], ...], \"unit_distance\": u}; "
-                        "default: auto (the data set's own for builtin inputs)")
-    r.add_argument("--technique", default=None,
-                   help="rendering technique: raycast, slice2d or slice3d for volumes, tetra for meshes, "
-                        "particles or splat for both (default: raycast, or tetra for a mesh)")
-    r.add_argument("--scalars", metavar="NAME",
-                   help="mesh inputs: the point array to render (default: the first scalar array)")
-    r.add_argument("--sort", choices=SORTS,
-                   help="tetra: cell order, exact per pixel (mpvo) or by centroid distance (default: mpvo)")
-    r.add_argument("--repetitions", type=_count, metavar="R",
-                   help="particles: independent particle sets averaged (default: 1)")
-    r.add_argument("--seed", type=_count, metavar="N", help="particles: random seed (default: 0)")
-    r.add_argument("--radius", type=_positive, metavar="W",
-                   help="particles: particle radius in world units (default: half a pixel at the data); "
-                        "splat: kernel standard deviation in sample spacings (default: 0.4)")
-    r.add_argument("--density", type=_count, metavar="K",
-                   help="splat: samples per data spacing along each axis (default: 1)")
-    r.add_argument("--cutoff", type=_positive, metavar="C",
-                   help="splat: kernel truncation in standard deviations (default: 3)")
-    r.add_argument("--sampler", choices=("rejection", "uniform", "metropolis"),
-                   help="particles: placement in each cell (default: rejection, unbiased)")
-    r.add_argument("--step", type=_positive, metavar="S",
-                   help="sampling step (slice distance for slice3d) in world units (default: half "
-                        "the smallest spacing; slice2d takes none, see --interpolate; tetra none)")
-    r.add_argument("--preintegrate", action="store_true",
-                   help="pre-integrated classification of whole segments (composite mode)")
-    r.add_argument("--interpolate", type=_count, metavar="K",
-                   help="slice2d: K intermediate slices per cell (default: 0)")
-    r.add_argument("--proxy", choices=("cpu", "vertex"),
-                   help="slice3d: slice polygons made on the CPU or in the vertex shader (default: cpu)")
-    r.add_argument("--shells", action="store_true",
-                   help="slice3d: slice along spherical shells around the eye instead of planes")
-    r.add_argument("--optical-model", choices=("emission_absorption", "absorption", "emission", "sabella"),
-                   help="composite mode: emission and absorption (default), absorption only (C = 0, "
-                        "A = 1 - T), emission only (C = integral of c tau, A = 0; written over black "
-                        "unless --background), or sabella (raycast: brightness 1 - T, hue from the "
-                        "ray's peak value, saturation fading with its depth)")
-    r.add_argument("--illustration", type=_illustration, metavar="TERM[,TERM...]",
-                   help="composite mode: Ebert-Rheingans terms with their default parameters: boundary, "
-                        "silhouette (extinction scaled by gradient magnitude / by view angle), tone "
-                        "(warm-to-cool colour), depth_cue (darker with depth)")
-    r.add_argument("--shading", action=argparse.BooleanOptionalAction, default=None,
-                   help="light the samples (Blinn-Phong, the headlight unless --light): on by default "
-                        "where it is defined (raycast, slice3d, slice2d in composite mode with an "
-                        "emitting optical model); --no-shading turns it off")
-    r.add_argument("--light", type=_light, action="append", metavar="SPACE:X,Y,Z[:I]",
-                   help="with --shading: a directional light towards X,Y,Z in world or view space "
-                        "(world:1,1,0, view:-1,1,1:0.5) or headlight[:I]; repeat for up to 4 "
-                        "(default: the headlight)")
-    r.add_argument("--gradients", choices=("on_the_fly", "texture"),
-                   help="with --shading: gradients from six field lookups or one gradient-texture "
-                        "lookup (default: on_the_fly)")
-    r.add_argument("--target", choices=("rgba32f", "rgba16f", "rgba8"),
-                   help="render target format (default: rgba32f)")
-    r.add_argument("--mode", choices=MODES,
-                   help="rendering mode (default: composite, or isosurface when --iso is given)")
-    r.add_argument("--iso", type=_number, metavar="V", help="iso-value for --mode isosurface (data units)")
-    r.add_argument("--size", type=_size, default=(512, 512), metavar="WxH",
-                   help="image size in pixels (default: 512x512)")
-    r.add_argument("--azimuth", type=_number, default=None, metavar="DEG",
-                   help="turn the camera about the up direction (default: 30). 0 looks along -z with +y "
-                        "up, or, for a file with an anatomical orientation (NIfTI, NRRD), at the face "
-                        "with the head up")
-    r.add_argument("--elevation", type=_number, default=None, metavar="DEG",
-                   help="then raise it towards the up direction (default: 20)")
-    r.add_argument("--zoom", type=_positive, default=1.0, metavar="F", help="> 1 moves closer (default: 1)")
-    r.add_argument("--fov", type=_positive, default=30.0, metavar="DEG",
-                   help="vertical field of view (default: 30)")
-    r.add_argument("--ortho", action="store_true", help="orthographic instead of perspective projection")
-    r.add_argument("--background", type=_background, metavar="R,G,B",
-                   help="composite over this colour (components in [0, 1]); render: default white "
-                        "(black for --optical-model emission), RGB unless --transparent; view: the "
-                        "window's first background, screenshots RGBA unless given")
-    raw = r.add_argument_group("raw and overriding geometry")
-    raw.add_argument("--shape", type=_shape, metavar="NZ,NY,NX", help="sample counts of a raw file, z slowest")
-    raw.add_argument("--dtype", metavar="D", help="sample type of a raw file: uint8, int16, <f4, >u2, ...")
-    raw.add_argument("--spacing", type=_spacing, metavar="SX,SY,SZ",
-                     help="sample spacing (required for raw files; replaces the file's otherwise)")
-    raw.add_argument("--origin", type=_origin, metavar="OX,OY,OZ", help="world position of the first sample")
-    raw.add_argument("--mask-nonfinite", action="store_true",
-                     help="treat NaN and inf samples as outside the volume instead of rejecting them")
-    r.add_argument("--backend", choices=("auto", "egl", "osmesa"), default="auto",
-                   help="headless GL backend (default: auto, EGL then OSMesa)")
-
-
-# which technique takes which option
-TECHNIQUE_OPTIONS = {"interpolate": ("slice2d",), "proxy": ("slice3d",), "shells": ("slice3d",),
-                     "preintegrate": ("raycast", "slice2d", "slice3d"), "sort": ("tetra",),
-                     "repetitions": ("particles",), "seed": ("particles",), "radius": ("particles", "splat"),
-                     "sampler": ("particles",), "density": ("splat",), "cutoff": ("splat",),
-                     "gradients": ("raycast", "slice2d", "slice3d")}
-
-#: the techniques that render meshes (cell projection); the others render grid volumes
-MESH_TECHNIQUES = ("tetra",)
-GRID_TECHNIQUES = ("raycast", "slice2d", "slice3d")
-
-# volume-only options (raw geometry and masking): given with a mesh INPUT, a usage error
-_VOLUME_OPTIONS = (("spacing", "--spacing"), ("origin", "--origin"), ("mask_nonfinite", "--mask-nonfinite"))
-
-
-def input_is_mesh(args):
-    """Whether INPUT is a mesh (rendered by cell projection) rather than a grid volume.
-    Raw geometry (--shape, --dtype) makes it a volume, whatever its extension."""
-    from .inputs import is_mesh_input
-    return is_mesh_input(getattr(args, "input", None) or "", getattr(args, "shape", None),
-                         getattr(args, "dtype", None))
-
-
-def technique_options(args):
-    """The keyword arguments for ``Renderer.render`` from parsed render options; an option
-    the chosen technique does not take is a usage error naming it, and so is a technique
-    for the other kind of input (a grid technique on a mesh, tetra on a volume). Without
-    --technique, ``args.technique`` is set to tetra for a mesh INPUT, raycast otherwise."""
-    mesh = input_is_mesh(args)
-    if args.technique is None:
-        args.technique = MESH_TECHNIQUES[0] if mesh else "raycast"
-    _check_input_kind(args, mesh)
-    kwargs = {"technique": args.technique}
-    for name in ("step", "preintegrate", "interpolate", "proxy", "shells", "sort", "repetitions", "seed",
-                 "radius", "sampler", "density", "cutoff", "gradients", "target"):
-        value = getattr(args, name, None)
-        if value is None or value is False:
-            continue
-        takers = TECHNIQUE_OPTIONS.get(name)
-        if takers is not None and args.technique not in takers:
-            raise UsageError(f"--{name}", f"applies to --technique {' or '.join(takers)} only, "
-                                          f"not {args.technique}")
-        if name == "step" and args.technique == "slice2d":
-            raise UsageError("--step", "slice2d's slice distance is fixed by the data "
-                                       "(spacing / (interpolate + 1)); use --interpolate K")
-        if name == "step" and args.technique in MESH_TECHNIQUES:
-            raise UsageError("--step", f"{args.technique} integrates each cell exactly and takes no step")
-        if name == "step" and args.technique == "particles":
-            raise UsageError("--step", "particles takes no step (the particles' density follows the TF)")
-        if name == "step" and args.technique == "splat":
-            raise UsageError("--step", "splat takes no step; --density sets the samples per spacing")
-        kwargs[name] = value
-    return kwargs
-
-
-def _check_input_kind(args, mesh):
-    """Technique and input options against the kind of INPUT (mesh or grid volume)."""
-    technique = args.technique
-    if mesh and technique in GRID_TECHNIQUES:
-        raise UsageError("--technique", f"{technique} renders grid volumes, but {args.input} is a mesh; "
-                                        f"use --technique {' or '.join(MESH_TECHNIQUES)}")
-    if not mesh and technique in MESH_TECHNIQUES:
-        raise UsageError("--technique", f"{technique} renders tetrahedral meshes, but {args.input} is a "
-                                        f"grid volume; use --technique {', '.join(GRID_TECHNIQUES[:-1])} or {GRID_TECHNIQUES[-1]}")
-    _check_input_options(args, mesh)
-
-
-def _check_input_options(args, mesh):
-    """--scalars only for meshes, the raw-volume options only for grids."""
-    if not mesh and getattr(args, "scalars", None) is not None:
-        raise UsageError("--scalars", f"chooses a mesh's point array; {args.input} is a grid volume")
-    if mesh:
-        for attr, option in _VOLUME_OPTIONS:
-            value = getattr(args, attr, None)
-            if value is not None and value is not False:
-                raise UsageError(option, f"is for grid volumes, not the mesh {args.input}")
-
 
 def build_parser(bench_module=None):
     """The argument parser; ``bench_module`` (dvr_gl.bench, if loaded) adds its options."""
@@ -406,7 +149,7 @@ def cmd_info_file(args, out=None):
             raise UsageError("--dtype", e.detail) from None
     mesh = input_is_mesh(args)
     _check_input_options(args, mesh)
-    data, preset = _load_input(args)
+    data, preset = load_input_args(args)
     if mesh:
         arrays = dvr_io.point_arrays(args.input)
         chosen = getattr(data, "scalars_name", None) or args.scalars or "?"
@@ -466,42 +209,6 @@ def _reason(exc):
     return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
 
 
-def _load_input(args):
-    """The volume (or mesh) and the default preset name (dvr_gl.inputs.load_input)."""
-    from .inputs import load_input
-    return load_input(args.input, scalars=getattr(args, "scalars", None), shape=args.shape, dtype=args.dtype,
-                      spacing=args.spacing, origin=args.origin, mask_nonfinite=args.mask_nonfinite)
-
-
-def _resolve_tf(spec, volume, default):
-    from .inputs import resolve_tf
-    try:
-        return resolve_tf(spec, volume, default)
-    except dvr_io.InputError as e:
-        raise UsageError("--tf", e.detail) from None
-
-
-def _check_out(path):
-    if not path.lower().endswith(".png"):
-        raise UsageError("--out", f"must name a .png file, got {path!r}")
-    directory = os.path.dirname(os.path.abspath(path))
-    if not os.path.isdir(directory):
-        raise UsageError("--out", f"the folder {directory!r} does not exist")
-    if os.path.isdir(path):
-        raise UsageError("--out", f"{path!r} is a folder")
-
-
-def _check_technique(name):
-    if name is None:  # the default for the input's kind: technique_options picks it
-        return
-    try:
-        from .techniques import names
-    except ImportError:  # no registry: the renderer will judge
-        return
-    if name not in names():
-        raise UsageError("--technique", f"must be one of {', '.join(names())}, got {name!r}")
-
-
 def auto_preset_name(data):
     from .transfer import auto_preset_name as name
     return name(data)
@@ -517,8 +224,8 @@ def cmd_render(args, out=None):
     from .inputs import FIRST_AZIMUTH, FIRST_ELEVATION, first_camera, shading_for
     from .scene import Scene
 
-    _check_out(args.out)
-    _check_technique(args.technique)
+    check_png(args.out)
+    check_technique(args.technique)
     render_kwargs = technique_options(args)
     mode = args.mode or ("isosurface" if args.iso is not None else "composite")
     if mode == "isosurface" and args.iso is None:
@@ -553,11 +260,16 @@ def cmd_render(args, out=None):
             raise UsageError("--dtype", e.detail) from None
 
     t0 = time.perf_counter()
-    volume, default_preset = _load_input(args)
-    tf_name, tf = _resolve_tf(args.tf, volume, default_preset)
+    volume, default_preset = load_input_args(args)
+    tf_name, tf = resolve_tf_option(args.tf, volume, default_preset)
     camera = first_camera(volume, azimuth=args.azimuth, elevation=args.elevation, zoom=args.zoom,
                           fov=args.fov, ortho=args.ortho)
     width, height = args.size
+    if mode == "isosurface":
+        lo, hi = volume.data_range
+        if not lo <= args.iso <= hi:
+            print(f"{PROG} render: warning: --iso {args.iso:g} is outside the data's range {lo:g}..{hi:g}: "
+                  "the surface is empty", file=sys.stderr)
     optical = {"optical_model": args.optical_model} if args.optical_model else {}
     if args.illustration:
         if mode != "composite":
@@ -745,7 +457,7 @@ def _guarded(command, func, args, debug):
     except dvr_io.InputError as e:
         if debug:
             raise
-        option = _OPTION_OF_FIELD.get(e.field)
+        option = OPTION_OF_FIELD.get(e.field)
         return _fail(command, f"{option}: {e.detail}" if option else f"INPUT: {e}", 2)
     except (ValueError, TypeError, NotImplementedError) as e:
         # The scene and the renderer validate their input and name the parameter.

@@ -221,6 +221,10 @@ def render(source, *, tf=None, technique=None, size=(512, 512), azimuth=None, el
         raise InputError("size", f"expected an int or (width, height), got {size!r}") from None
     if technique is None:
         technique = "tetra" if getattr(data, "n_tets", None) is not None else "raycast"
+    if iso is not None and not data.data_range[0] <= iso <= data.data_range[1]:
+        import warnings
+        warnings.warn(f"iso {iso:g} is outside the data's range {data.data_range[0]:g}..{data.data_range[1]:g}: "
+                      "the surface is empty", stacklevel=2)
     if shading is None:
         shading = shading_for(technique, mode)
     scene = Scene(data, tf, first_camera(data, azimuth=azimuth, elevation=elevation, zoom=zoom, fov=fov,

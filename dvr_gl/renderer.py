@@ -13,7 +13,7 @@ from .gl.context import context_lost, current, describe, idle_framebuffer, share
 from .gl.programs import ProgramCache
 from .progress import Progress
 from .cache import LRU, IdentityKey as _Key, TableCache
-from .techniques import get_technique
+from .techniques import check_options, get_technique
 
 
 class Renderer:
@@ -205,6 +205,7 @@ class Renderer:
         if self._released:
             raise RuntimeError("this Renderer has been released")
         tech = get_technique(technique)
+        check_options(technique, options)
         plan = tech.make_plan(scene, step, tables=self.tables, **options)
         return tech.draw(self, plan)
 

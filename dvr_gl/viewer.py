@@ -1408,23 +1408,15 @@ def _no_display_message(detail):
 # ----------------------------------------------------------------------------- the command
 
 def build_parser():
-    """``dvr-gl render``'s options (from :mod:`dvr_gl.cli`) plus the viewer's."""
-    from . import cli
+    """``dvr-gl render``'s options (:func:`dvr_gl.options.add_render_options`) plus the viewer's."""
+    from .options import add_render_options
 
     description = ("Open a volume in an interactive window. Takes every option of dvr-gl render "
                    "(--size is the window size). Press h in the window for the keys.")
     epilog = "Off-screen (scripts, CI): xvfb-run -a dvr-gl view INPUT --screenshot out.png --frames 5"
-    add = getattr(cli, "add_render_options", None)
-    if add is not None:
-        parser = argparse.ArgumentParser(prog=PROG, description=description, epilog=epilog)
-        add(parser)
-    else:  # an older cli: borrow the render subcommand's parser as a parent
-        render = next(a for a in cli.build_parser()._actions
-                      if isinstance(a, argparse._SubParsersAction)).choices["render"]
-        parser = argparse.ArgumentParser(prog=PROG, description=description, epilog=epilog,
-                                         parents=[render], conflict_handler="resolve")
-    if not any(action.dest == "out" for action in parser._actions):
-        parser.add_argument("--out", "-o", help=argparse.SUPPRESS)
+    parser = argparse.ArgumentParser(prog=PROG, description=description, epilog=epilog)
+    add_render_options(parser)
+    parser.add_argument("--out", "-o", help=argparse.SUPPRESS)
     for action in parser._actions:
         if action.dest == "out":  # render's --out: here another name for --screenshot
             action.required = False
@@ -1455,44 +1447,31 @@ def _positive_int(text):
     return value
 
 
-def _check_png(path, option):
-    from .cli import UsageError
-
-    if not path.lower().endswith(".png"):
-        raise UsageError(option, f"must name a .png file, got {path!r}")
-    directory = os.path.dirname(os.path.abspath(path))
-    if not os.path.isdir(directory):
-        raise UsageError(option, f"the folder {directory!r} does not exist")
-    if os.path.isdir(path):
-        raise UsageError(option, f"{path!r} is a folder")
-
-
 def settings_from_args(args) -> Settings:
     """Check the options and load the input (no window yet): a bad file fails here."""
-    from . import cli
+    from .options import UsageError, check_png, check_technique, load_input_args, resolve_tf_option, \
+        technique_options
 
     screenshot, option = (args.screenshot, "--screenshot") if args.screenshot else (args.out, "--out")
     if screenshot:
-        _check_png(screenshot, option)
-    cli._check_technique(args.technique)
-    options = {}
-    if hasattr(cli, "technique_options"):  # checks that each option fits the technique
-        options = dict(cli.technique_options(args))
-        options.pop("technique", None)
-        options.pop("step", None)
+        check_png(screenshot, option)
+    check_technique(args.technique)
+    options = dict(technique_options(args))    # checks that each option fits the technique
+    options.pop("technique", None)
+    options.pop("step", None)
     # unlike render, isosurface mode needs no --iso: the viewer picks one (keys , and . move it)
     mode = args.mode or ("isosurface" if args.iso is not None else "composite")
     if args.iso is not None and mode != "isosurface":
-        raise cli.UsageError("--iso", f"is only used with --mode isosurface, not --mode {mode}")
+        raise UsageError("--iso", f"is only used with --mode isosurface, not --mode {mode}")
     if args.dtype is not None:
         try:
             dvr_io._parse_dtype(args.dtype)
         except dvr_io.InputError as e:
-            raise cli.UsageError("--dtype", e.detail) from None
+            raise UsageError("--dtype", e.detail) from None
     if not args.tf_out.lower().endswith(".json"):
-        raise cli.UsageError("--tf-out", f"must name a .json file, got {args.tf_out!r}")
-    volume, default_preset = cli._load_input(args)
-    tf_name, tf = cli._resolve_tf(args.tf, volume, default_preset)
+        raise UsageError("--tf-out", f"must name a .json file, got {args.tf_out!r}")
+    volume, default_preset = load_input_args(args)
+    tf_name, tf = resolve_tf_option(args.tf, volume, default_preset)
     return Settings(volume=volume, tf=tf, tf_name=tf_name, input_name=os.path.basename(args.input) or args.input,
                     technique=args.technique, mode=mode, iso=args.iso, step=args.step, size=tuple(args.size),
                     azimuth=args.azimuth, elevation=args.elevation, zoom=args.zoom, fov=args.fov,
@@ -1514,7 +1493,7 @@ def open_viewer(argv) -> Viewer:
 def main(argv=None) -> int:
     """``dvr-gl view``: returns the exit status (0; 1 no window or a failed frame; 2 bad
     input, with a one-line message; 130 interrupted). ``DVR_GL_DEBUG=1`` shows tracebacks."""
-    from . import cli
+    from .options import OPTION_OF_FIELD, UsageError
 
     argv = list(sys.argv[1:] if argv is None else argv)
     debug = bool(os.environ.get("DVR_GL_DEBUG"))
@@ -1527,14 +1506,14 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print(f"{PROG}: interrupted", file=sys.stderr)
         return 130
-    except cli.UsageError as e:
+    except UsageError as e:
         if debug:
             raise
         return _fail(str(e), 2)
     except dvr_io.InputError as e:
         if debug:
             raise
-        option = cli._OPTION_OF_FIELD.get(e.field)
+        option = OPTION_OF_FIELD.get(e.field)
         return _fail(f"{option}: {e.detail}" if option else f"INPUT: {e}", 2)
     except ImportError as e:
         if debug:

@@ -17,6 +17,7 @@ from PIL import Image
 import dvr_gl
 from dvr_gl import cli
 from dvr_gl.inputs import first_camera
+from dvr_gl.options import load_input_args
 from dvr_gl.io import load_volume, to_png_array
 from dvr_gl.transfer import auto_preset
 
@@ -392,7 +393,7 @@ def test_mesh_input_picks_tetra_and_takes_its_options(tiny_mesh, tiny):
     # raw geometry makes any name a volume, even one meshio claims (.dat, .vol)
     args = parser.parse_args(["render", "scan.dat", "--out", "x.png", "--shape", "4,5,6", "--dtype", "float32"])
     assert cli.technique_options(args) == {"technique": "raycast"}
-    volume, preset = cli._load_input(parser.parse_args(["render", str(d / "tiny.vtu"), "--out", "x.png",
+    volume, preset = load_input_args(parser.parse_args(["render", str(d / "tiny.vtu"), "--out", "x.png",
                                                         "--scalars", "twice"]))
     assert isinstance(volume, dvr_gl.TetMesh) and volume.data_range == (0.0, 70.0) and preset == "auto"
 

@@ -149,3 +149,25 @@ def test_a_mesh_file_renders_its_first_field_not_a_flag(tmp_path):
     mesh = dvr_gl.io.load_mesh(path)
     assert mesh.scalars_name == "Density" and mesh.scalars.tolist() == [0.1, 0.5, 0.9, 1.3, 2.0]
     assert dvr_gl.io.load_mesh(path, scalars="IBlank").scalars_name == "IBlank"
+
+
+def test_an_unknown_option_names_the_techniques_options(renderer):
+    vol = dvr_gl.Volume(np.random.default_rng(1).random((5, 6, 7)).astype(np.float32))
+    scene = dvr_gl.Scene(vol, auto_preset(vol), dvr_gl.default_camera(vol), 16, 16)
+    with pytest.raises(TypeError, match="raycast has no option 'stepp'; its options are step, target, jitter_seed"):
+        renderer.render(scene, "raycast", stepp=0.3)
+    with pytest.raises(TypeError, match="slice2d has no option 'shells'; its options are target, interpolate"):
+        dvr_gl.reference.render(scene, "slice2d", shells=True)
+    with pytest.raises(TypeError, match="raycast has no option 'techniqe'"):
+        dvr_gl.render(vol, techniqe="slice3d", size=16)
+
+
+def test_an_iso_value_outside_the_data_warns(tmp_path, capsys):
+    from dvr_gl import cli
+    vol = dvr_gl.Volume(np.random.default_rng(1).random((5, 6, 7)).astype(np.float32))
+    with pytest.warns(UserWarning, match="iso 7 is outside the data's range"):
+        dvr_gl.render(vol, mode="isosurface", iso=7.0, size=16)
+    np.save(tmp_path / "v.npy", vol.data)
+    assert cli.main(["render", str(tmp_path / "v.npy"), "--iso", "7", "--size", "16x16", "-o",
+                     str(tmp_path / "v.png")]) == 0
+    assert "warning: --iso 7 is outside the data's range" in capsys.readouterr().err

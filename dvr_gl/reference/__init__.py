@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from ..techniques import get_technique
+from ..techniques import check_options, get_technique
 # Imported here, not inside a function, so the package attribute `exact` is the function
 # for good: importing the submodule first would otherwise leave the module in its place.
 from .exact import exact
@@ -16,6 +16,7 @@ def render(scene, technique="raycast", step=None, *, lut_exact=False, **options)
     ``lut_exact=True`` classifies with the exact transfer function instead of its lookup
     table. Returns (H, W, 4) float64, premultiplied RGBA, row 0 on top."""
     import importlib
+    check_options(technique, options)
     plan = get_technique(technique).make_plan(scene, step, **options)
     module = importlib.import_module(f"{__name__}.{technique}")
     image = module.render_plan(plan, lut_exact=lut_exact)

@@ -33,3 +33,20 @@ def get_technique(name):
     if name not in _MODULES:
         raise ValueError(f"technique must be one of {', '.join(_MODULES)}, got {name!r}")
     return importlib.import_module(_MODULES[name])
+
+
+def options(name):
+    """The keyword options ``name``'s ``make_plan`` takes (``step`` and the renderer's
+    ``tables`` aside)."""
+    import inspect
+    module = get_technique(name)
+    params = inspect.signature(module.make_plan).parameters
+    keywords = tuple(p for p, v in params.items() if v.kind == v.KEYWORD_ONLY and p != "tables")
+    return (("step",) if module.TAKES_STEP else ()) + keywords
+
+
+def check_options(name, given):
+    """An option ``name`` does not take is a TypeError that names the ones it does."""
+    unknown = [k for k in given if k not in options(name) or k == "step"]   # step is its own argument
+    if unknown:
+        raise TypeError(f"{name} has no option {unknown[0]!r}; its options are {', '.join(options(name))}")
