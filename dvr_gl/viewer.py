@@ -1409,7 +1409,7 @@ def _no_display_message(detail):
 
 def build_parser():
     """``dvr-gl render``'s options (:func:`dvr_gl.options.add_render_options`) plus the viewer's."""
-    from .options import add_render_options
+    from .options import add_render_options, whole_number
 
     description = ("Open a volume in an interactive window. Takes every option of dvr-gl render "
                    "(--size is the window size). Press h in the window for the keys.")
@@ -1428,23 +1428,13 @@ def build_parser():
     parser.add_argument("--screenshot", metavar="IMAGE.png",
                         help="where s (and --frames) write the screenshot: the render without overlays, "
                              "as dvr-gl render writes it (default: dvr-gl-view-NNN.png)")
-    parser.add_argument("--frames", type=_positive_int, metavar="N",
+    parser.add_argument("--frames", type=whole_number(1), metavar="N",
                         help="render N frames at full quality, save the screenshot (if --screenshot) and exit")
     parser.add_argument("--tf-out", default="dvr-gl-tf.json", metavar="FILE.json",
                         help="where ctrl+s saves the edited transfer function and ctrl+o loads it from "
                              "(default: dvr-gl-tf.json)")
     parser.add_argument("--hide-editor", action="store_true", help="start with the transfer-function editor hidden")
     return parser
-
-
-def _positive_int(text):
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be at least 1, got {text!r}")
-    return value
 
 
 def settings_from_args(args) -> Settings:

@@ -527,27 +527,34 @@ def test_render_particles_on_a_grid_and_a_mesh(renderer, tiny, tiny_mesh, capsys
     assert code == 2 and "--repetitions: applies to --technique particles only, not raycast" in err
 
 
+def _quick_bench(tmp_path, suite, *extra):
+    """``dvr-gl bench --suite SUITE --quick`` with ``extra`` options, writing under
+    tmp_path; returns (stdout, rows of the csv)."""
+    from dvr_gl import bench
+    parser = argparse.ArgumentParser()
+    bench.add_arguments(parser)
+    args = parser.parse_args(["--suite", suite, "--quick", *extra, "--out", str(tmp_path / suite)])
+    assert bench.run_bench(args) == 0
+    return args, list(csv.DictReader(open(tmp_path / f"{suite}.csv")))
+
+
 def test_particles_bench_quick_run(tmp_path, capsys):
     """`dvr-gl bench --suite particles` end to end on the CT head (64x64): a row per R,
     the ray caster's, splatting's at density 1 and 2 and VTK's, the slope printed, results
     written."""
     pytest.importorskip("vtk")
-    from dvr_gl import bench
-    parser = argparse.ArgumentParser()
-    bench.add_arguments(parser)
-    args = parser.parse_args(["--suite", "particles", "--quick", "--datasets", "head", "--repetitions-list", "1,4",
-                              "--out", str(tmp_path / "p")])
-    assert bench.run_bench(args) == 0
+    _, rows = _quick_bench(tmp_path, "particles", "--datasets", "head", "--repetitions-list", "1,4")
     out = capsys.readouterr().out
     assert "head: RMSE falls with R at a log-log slope of" in out
-    rows = list(csv.DictReader(open(tmp_path / "p.csv")))
     assert [r["repetitions"] for r in rows[:2]] == ["1", "4"]
     assert [r["renderer"] for r in rows[2:]] == ["dvr_gl raycast", "dvr_gl splat density 1", "dvr_gl splat density 2",
                                                  "VTK raycast 1 voxel"]
     assert float(rows[1]["rmse"]) < float(rows[0]["rmse"]) and int(rows[0]["particles"]) > 0
     assert float(rows[4]["rmse"]) < float(rows[3]["rmse"])          # splat: density 2 is closer to exact
-    bad = parser.parse_args(["--suite", "particles", "--repetitions-list", "0,4"])
-    assert bench.run_bench(bad) == 2
+    from dvr_gl import bench
+    parser = argparse.ArgumentParser()
+    bench.add_arguments(parser)
+    assert bench.run_bench(parser.parse_args(["--suite", "particles", "--repetitions-list", "0,4"])) == 2
 
 
 def test_render_splat_options(renderer, tiny, capsys):
@@ -661,15 +668,10 @@ def test_shading_bench_quick_run(tmp_path, capsys):
     """`dvr-gl bench --suite shading` end to end on the CT head (64x64): every renderer's
     row with its cost, VTK's ShadeOn beside it, and the lit phantom's convergence."""
     pytest.importorskip("vtk")
-    from dvr_gl import bench
-    parser = argparse.ArgumentParser()
-    bench.add_arguments(parser)
-    args = parser.parse_args(["--suite", "shading", "--quick", "--datasets", "head", "--steps", "1",
-                              "--out", str(tmp_path / "s")])
-    assert bench.run_bench(args) == 0
+    _, table = _quick_bench(tmp_path, "shading", "--datasets", "head", "--steps", "1")
     out = capsys.readouterr().out
     assert "lit Marschner-Lobb against exact" in out
-    rows = {r["renderer"]: r for r in csv.DictReader(open(tmp_path / "s.csv"))}
+    rows = {r["renderer"]: r for r in table}
     assert set(rows) == {"raycast", "raycast lit", "raycast lit texture", "raycast +boundary",
                          "raycast +silhouette", "raycast +tone", "raycast +depth_cue", "raycast lit +all four",
                          "raycast lit +all four texture", "slice3d", "slice3d lit",
@@ -677,7 +679,7 @@ def test_shading_bench_quick_run(tmp_path, capsys):
     assert float(rows["raycast +tone"]["cost"]) > 0 and float(rows["raycast +tone"]["rmse"]) < 1e-2
     assert float(rows["raycast lit"]["cost"]) > 0 and float(rows["VTK GPU raycast ShadeOn"]["cost"]) > 0
     assert float(rows["raycast lit"]["rmse"]) < 1e-2
-    convergence = json.load(open(tmp_path / "s.json"))["info"]["convergence"]
+    convergence = json.load(open(tmp_path / "shading.json"))["info"]["convergence"]
     assert np.mean(convergence["raycast_orders"]) > 1.7
 
 

@@ -12,14 +12,14 @@ import pytest
 
 import dvr_gl
 from dvr_gl import metrics, reference
-from dvr_gl.phantoms import marschner_lobb, marschner_lobb_tf
 from dvr_gl.reference.common import box_rays
 from dvr_gl.reference.shading import depth_range
 from dvr_gl.scene import ILLUSTRATION_TERMS
 from dvr_gl.techniques import get_technique
 
 from test_raycast import derived_tolerance
-from test_shading import RAMP, TF, cameras, gradient_error, gradient_floor, planar_ramp
+from test_shading import (RAMP, TF, cameras, errors_as_the_step_halves, gradient_error, gradient_floor,
+                          marschner_lobb_scene, planar_ramp)
 from test_slicing import slice_tolerance
 
 U32 = 2.0 ** -24
@@ -192,15 +192,7 @@ def test_depth_cue_of_a_constant_box_is_the_closed_form(renderer, technique, opt
 
 
 def test_error_against_exact_is_second_order_with_every_term(renderer):
-    volume = marschner_lobb(41)
-    scene = dvr_gl.Scene(volume, marschner_lobb_tf(), dvr_gl.default_camera(volume, azimuth=30, elevation=20),
-                         width=48, height=48, shading=True, illustration=ALL)
-    exact = reference.exact(scene)
-    h = volume.min_spacing
-    errors = [metrics.rmse(renderer.render(scene, step=k * h, ert_transmittance=0.0), exact)
-              for k in (1.0, 0.5, 0.25, 0.125)]
-    orders = np.log2(np.array(errors[:-1]) / np.array(errors[1:]))
-    assert all(e1 < e0 for e0, e1 in zip(errors, errors[1:])), errors
+    _, orders = errors_as_the_step_halves(renderer, marschner_lobb_scene(48, shading=True, illustration=ALL))
     assert orders.mean() > 1.7, orders
 
 

@@ -10,13 +10,12 @@ import pytest
 
 import dvr_gl
 from dvr_gl import metrics, reference
-from dvr_gl.phantoms import marschner_lobb, marschner_lobb_tf
 from dvr_gl.reference.common import box_rays
 from dvr_gl.techniques import get_technique
 
 from test_raycast import derived_tolerance
 from test_slicing import slice_tolerance
-from test_shading import RAMP, TF, cameras
+from test_shading import RAMP, TF, cameras, errors_as_the_step_halves, marschner_lobb_scene
 
 U32 = 2.0 ** -24
 W, H = 40, 32
@@ -135,15 +134,7 @@ def test_lit_emission_matches_reference(renderer):
 
 @pytest.mark.parametrize("model", MODELS)
 def test_error_against_exact_is_second_order(renderer, model):
-    volume = marschner_lobb(41)
-    scene = dvr_gl.Scene(volume, marschner_lobb_tf(), dvr_gl.default_camera(volume, azimuth=30, elevation=20),
-                         width=48, height=48, optical_model=model)
-    exact = reference.exact(scene)
-    h = volume.min_spacing
-    errors = [metrics.rmse(renderer.render(scene, step=k * h, ert_transmittance=0.0), exact)
-              for k in (1.0, 0.5, 0.25, 0.125)]
-    orders = np.log2(np.array(errors[:-1]) / np.array(errors[1:]))
-    assert all(e1 < e0 for e0, e1 in zip(errors, errors[1:])), errors
+    _, orders = errors_as_the_step_halves(renderer, marschner_lobb_scene(48, optical_model=model))
     assert orders.mean() > 1.7, orders
 
 
@@ -213,14 +204,7 @@ def test_exact_sabella_of_a_constant_box_is_the_closed_form(camera):
 def test_sabella_error_against_exact_shrinks(renderer):
     """The peak's value converges at second order, its position (hence the saturation)
     at first order: the error falls at least like the step."""
-    volume = marschner_lobb(41)
-    scene = dvr_gl.Scene(volume, marschner_lobb_tf(), dvr_gl.default_camera(volume, azimuth=30, elevation=20),
-                         width=48, height=48, optical_model="sabella")
-    exact = reference.exact(scene)
-    h = volume.min_spacing
-    errors = [metrics.rmse(renderer.render(scene, step=k * h), exact) for k in (1.0, 0.5, 0.25, 0.125)]
-    orders = np.log2(np.array(errors[:-1]) / np.array(errors[1:]))
-    assert all(e1 < e0 for e0, e1 in zip(errors, errors[1:])), errors
+    _, orders = errors_as_the_step_halves(renderer, marschner_lobb_scene(48, optical_model="sabella"))
     assert orders.mean() > 0.8, orders
 
 

@@ -16,7 +16,7 @@ from dvr_gl.reference.common import trilinear, world_to_index
 from dvr_gl.reference.shading import gradient, sample_gradients
 from dvr_gl.techniques import get_technique
 
-from test_raycast import derived_tolerance
+from test_raycast import cameras, derived_tolerance
 from test_slicing import preintegrated_tolerance, slice_tolerance
 
 U32 = 2.0 ** -24
@@ -37,16 +37,6 @@ def tilted_ramp(shape=(16, 20, 24), spacing=(1.0, 0.8, 1.3), origin=(5.0, -2.0, 
 RAMP = tilted_ramp()
 TF = dvr_gl.TransferFunction(color=[(0, 0.9, 0.3, 0.1), (40, 0.3, 0.9, 0.4), (90, 0.2, 0.4, 1.0)],
                              opacity=[(0, 0.0), (20, 0.3), (45, 0.05), (70, 0.5), (90, 0.1)], unit_distance=1.0)
-
-
-def cameras(volume):
-    lo, hi = volume.bounds
-    centre = (lo + hi) / 2
-    return {
-        "perspective": dvr_gl.default_camera(volume, azimuth=35, elevation=25),
-        "ortho": dvr_gl.default_camera(volume, azimuth=-20, elevation=10, ortho=True),
-        "eye_inside": dvr_gl.Camera(centre + [3.0, 1.0, 2.0], centre - [4.0, 0.0, 1.0], fov=70),
-    }
 
 
 def gradient_floor(volume):
@@ -266,10 +256,26 @@ def test_a_view_light_along_the_view_is_the_headlight_in_orthographic_views(rend
 
 # -- accuracy against exact ------------------------------------------------------------------
 
-def lit_marschner_lobb(size=64):
+def marschner_lobb_scene(size=64, **options):
+    """The Marschner-Lobb phantom, oblique, with the scene options given."""
     volume = marschner_lobb(41)
     return dvr_gl.Scene(volume, marschner_lobb_tf(), dvr_gl.default_camera(volume, azimuth=30, elevation=20),
-                        width=size, height=size, shading=True)
+                        width=size, height=size, **options)
+
+
+def lit_marschner_lobb(size=64):
+    return marschner_lobb_scene(size, shading=True)
+
+
+def errors_as_the_step_halves(renderer, scene, steps=(1.0, 0.5, 0.25, 0.125), technique="raycast"):
+    """RMSE against the exact image at each step (voxels), and the observed orders; the
+    errors must fall at every halving."""
+    exact = reference.exact(scene)
+    h = scene.volume.min_spacing
+    opts = {"ert_transmittance": 0.0} if technique == "raycast" else {}
+    errors = [metrics.rmse(renderer.render(scene, technique, step=k * h, **opts), exact) for k in steps]
+    assert all(e1 < e0 for e0, e1 in zip(errors, errors[1:])), errors
+    return errors, np.log2(np.array(errors[:-1]) / np.array(errors[1:]))
 
 
 @pytest.mark.parametrize("technique", ["raycast", "slice3d"])
@@ -279,15 +285,10 @@ def test_lit_quarter_voxel_is_as_accurate_as_an_ideal_marcher(renderer, techniqu
     four halvings of the step."""
     scene = lit_marschner_lobb()
     h = scene.volume.min_spacing
-    exact = reference.exact(scene)
-    opts = {"ert_transmittance": 0.0} if technique == "raycast" else {}
     ideal = metrics.rmse(reference.render(scene, "raycast", step=0.25 * h, lut_exact=True, ert_transmittance=0.0),
-                         exact)
-    errors = [metrics.rmse(renderer.render(scene, technique, step=k * h, **opts), exact)
-              for k in (1.0, 0.5, 0.25, 0.125, 0.0625)]
+                         reference.exact(scene))
+    errors, orders = errors_as_the_step_halves(renderer, scene, (1.0, 0.5, 0.25, 0.125, 0.0625), technique)
     assert errors[2] <= 1.5 * ideal, (errors[2], ideal)
-    orders = np.log2(np.array(errors[:-1]) / np.array(errors[1:]))
-    assert all(e1 < e0 for e0, e1 in zip(errors, errors[1:])), errors
     assert orders.mean() > 1.7, orders
 
 
