@@ -234,8 +234,9 @@ def cmd_render(args, out=None):
         raise UsageError("--iso", f"is only used with --mode isosurface, not --mode {mode}")
     if args.shading and mode not in ("composite", "isosurface"):
         raise UsageError("--shading", f"lights composite samples (isosurfaces always are), not --mode {mode}")
-    if args.shading and args.technique not in ("raycast", "slice2d", "slice3d"):
-        raise UsageError("--shading", f"applies to --technique raycast, slice3d or slice2d, not {args.technique}")
+    if args.shading and args.technique not in ("raycast", "slice2d", "slice3d", "tetra"):
+        raise UsageError("--shading", f"applies to --technique raycast, slice3d, slice2d or tetra, "
+                                      f"not {args.technique}")
     if args.optical_model not in (None, "emission_absorption"):
         if args.optical_model == "sabella" and args.technique != "raycast":
             raise UsageError("--optical-model", f"sabella applies to --technique raycast, not {args.technique}")

@@ -163,6 +163,8 @@ def first_camera(data, azimuth=None, elevation=None, zoom=1.0, fov=30.0, ortho=F
     return default_camera(data, azimuth=azimuth, elevation=elevation, zoom=zoom, fov=fov, ortho=ortho, **extra)
 
 
+# where front ends light by default; tetra lights when asked (a cell's gradient is constant,
+# so lighting shows the cells' facets)
 LIGHTING_TECHNIQUES = ("raycast", "slice3d", "slice2d")
 
 

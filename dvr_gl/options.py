@@ -164,7 +164,8 @@ def add_render_options(r):
     r.add_argument("--shading", action=argparse.BooleanOptionalAction, default=None,
                    help="light the samples (Blinn-Phong, the headlight unless --light): on by default "
                         "where it is defined (raycast, slice3d, slice2d in composite mode with an "
-                        "emitting optical model); --no-shading turns it off")
+                        "emitting optical model), on request for tetra (each cell's own gradient); "
+                        "--no-shading turns it off")
     r.add_argument("--light", type=_light, action="append", metavar="SPACE:X,Y,Z[:I]",
                    help="with --shading: a directional light towards X,Y,Z in world or view space "
                         "(world:1,1,0, view:-1,1,1:0.5) or headlight[:I]; repeat for up to 4 "

@@ -967,8 +967,8 @@ def test_mesh_orbit_sort_and_modes(mesh_viewer):
     assert "takes no step" in v.messages[-1] and v.render_arguments()[2] is None
     press(v, "p")
     assert "tetra has no preintegrate option" in v.messages[-1]
-    press(v, "l")                                      # tetra does not light samples: refused
-    assert not v.lit and "cannot switch shading: tetra in mode composite" in v.messages[-1]
+    press(v, "l")                                      # tetra lights when asked (not by default)
+    assert "cannot switch shading: tetra" in v.messages[-1] and not v.lit
     for number in range(1, len(v.presets()) + 1):       # every preset, or a message
         press(v, str(number))
         v.refine()

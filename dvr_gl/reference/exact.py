@@ -61,7 +61,7 @@ import numpy as np
 
 from ..scene import Scene
 from .common import ray_box
-from .shading import gradient, gradient_epsilon, sample_terms, scene_lights, shade_blinn_phong
+from .shading import gradient, gradient_epsilon, phong_terms, sample_terms, scene_lights, shade_blinn_phong
 
 __all__ = ["exact", "VERSION"]
 
@@ -207,6 +207,9 @@ class _Classified:
     # bounds the extinction scale from below (for the error weights).
     lighting = None
     scale_floor = 1.0
+    # what each piece carries for them: its geometry (grids, terms per node) or its own
+    # constant colour factor and added colour (a mesh's cell, lit with its gradient)
+    piece_keys = ()
 
     def __init__(self, tf, optical_model="emission_absorption"):
         self.tf = tf
@@ -262,7 +265,7 @@ class _Classified:
         coef, E, PE = coef[busy], E[busy], PE[busy]
         rows, h = P["rows"][busy], P["h"][busy]
         # a lit scene: each piece's midpoint, half-length vector and direction (world)
-        geometry = {k: P[k][busy] for k in ("base", "hd", "dir")} if self.lighting else None
+        geometry = {k: P[k][busy] for k in self.piece_keys} if self.piece_keys else None
         npc = len(busy)
 
         # breakpoints: crossings of knots (s known exactly there) ...
@@ -389,7 +392,7 @@ class _Classified:
             for b0 in range(0, idx.size, _BATCH):
                 sl = slice(b0, b0 + _BATCH)
                 i = idx[sl]
-                geo = {k: sub[k][i] for k in ("base", "hd", "dir")} if "base" in sub else None
+                geo = {k: sub[k][i] for k in self.piece_keys} if self.piece_keys else None
                 ODk[sl], Ck[sl], err[sl] = self.gk(sub["coef"][i], sub["h"][i], sub["m"][i], sub["cend"][i],
                                                    ta[sl], tb[sl], geo)
             ok = (err * weight[idx] * np.exp(-pre) <= _TOL) | (depth >= _MAX_DEPTH)
@@ -414,6 +417,8 @@ class _Classified:
         c = np.zeros((len(s), 3)) if self.absorption else self.tf.color(s)
         if geo is None or len(s) == 0:
             return c
+        if "factor" in geo:
+            return c * geo["factor"][rows][:, None] + geo["offset"][rows]
         points = geo["base"][rows] + tau[:, None] * geo["hd"][rows]
         factor, offset, _ = self.lighting(points, geo["dir"][rows])
         return c * factor[:, None] + offset
@@ -430,7 +435,10 @@ class _Classified:
         alpha = np.clip(self.a0[m][:, None] + self.a1[m][:, None] * ds, 0.0, _ALPHA_MAX)
         tau = -np.log1p(-alpha) * self.inv_u
         factor = offset = None
-        if geo is not None:
+        if geo is not None and "factor" in geo:      # constant over the piece
+            factor = np.broadcast_to(geo["factor"][:, None], x.shape)
+            offset = np.broadcast_to(geo["offset"][:, None, :], x.shape + (3,))
+        elif geo is not None:
             points = geo["base"][:, None, :] + x[..., None] * geo["hd"][:, None, :]
             factor, offset, scale = self.lighting(points, geo["dir"][:, None, :])
             tau = tau * scale
@@ -481,6 +489,7 @@ class _Exact(_Classified):
         terms = sample_terms(scene, self.values)
         if terms is not None:
             self.lighting = terms.at
+            self.piece_keys = ("base", "hd", "dir")
             for name in ("boundary", "silhouette"):
                 if name in scene.illustration:
                     self.scale_floor *= min(scene.illustration[name][0], 1.0)
@@ -726,6 +735,11 @@ class _MeshExact(_Classified):
         super().__init__(scene.tf, scene.optical_model)
         self.scene = scene
         self.mesh = scene.volume
+        if scene.shading and scene.mode == "composite":
+            from ..techniques.tetra import cell_fields
+            self.gradients = cell_fields(self.mesh)[:, 0, :3]
+            self.dirs = scene.camera.rays(scene.width, scene.height)[1].reshape(-1, 3)
+            self.piece_keys = ("factor", "offset")
 
     @staticmethod
     def _pieces(seg, idx, rows):
@@ -756,7 +770,13 @@ class _MeshExact(_Classified):
                     break
                 a, rows = np.unique(ray[idx], return_inverse=True)
                 T = np.exp(-od[a])
-                OD, C, term = self.window(self._pieces(seg, idx, rows), T, len(a))
+                P = self._pieces(seg, idx, rows)
+                if self.piece_keys:     # lit: each cell's lights are constant along its piece
+                    P["factor"], specular = phong_terms(self.gradients[seg["tet"][idx]], self.dirs[seg["pixel"][idx]],
+                                                        self.scene.phong, gradient_epsilon(self.mesh),
+                                                        scene_lights(self.scene))
+                    P["offset"] = np.repeat(specular[:, None], 3, axis=1)
+                OD, C, term = self.window(P, T, len(a))
                 col[a] += T[:, None] * C
                 if not self.emission:
                     od[a] += OD
@@ -959,9 +979,9 @@ def exact(scene, cache=True, cache_dir=None) -> np.ndarray:
         raise TypeError(f"scene must be a dvr_gl.Scene, got {type(scene).__name__}")
     if scene.is_mesh and scene.optical_model == "sabella":
         raise ValueError("optical_model='sabella' is defined here for grids (the peak of the trilinear field)")
-    if scene.is_mesh and (scene.shading or scene.illustration):
-        raise ValueError("shading=True and illustration terms are defined for grids (contract section 6: "
-                         "central differences one spacing apart); a TetMesh scene must be unlit")
+    if scene.is_mesh and scene.illustration:
+        raise ValueError("illustration terms are defined for grids here (central differences one spacing "
+                         "apart); a TetMesh scene takes lighting only, with each cell's own gradient")
     path = None
     if cache:
         directory = _cache_dir(cache_dir)

@@ -101,10 +101,12 @@ def gradient_epsilon(volume):
     """|g| at or below this is 'below a small threshold' (contract section 6):
     1e-6 * (data range) / (min spacing). A constant volume has no range; there the scale
     is the values' magnitude instead, so that the rounding of interpolating equal values
-    (about 1e-16 of them) stays unlit rather than picking a random normal."""
+    (about 1e-16 of them) stays unlit rather than picking a random normal. A TetMesh (whose
+    cells carry their own linear gradients) uses its median edge length for the spacing."""
     lo, hi = volume.data_range
     scale = hi - lo if hi > lo else max(abs(lo), abs(hi))
-    return 1e-6 * scale / volume.min_spacing
+    length = volume.cell_size if hasattr(volume, "cell_size") else volume.min_spacing
+    return 1e-6 * scale / length
 
 
 def gradient_max(volume, values):

@@ -35,6 +35,13 @@ def render_plan(plan, lut_exact=False):
     order = np.lexsort((r, seg["pixel"]))              # per pixel, in draw order (back first)
     pix = seg["pixel"][order]
     rgba = linear_segment(plan.knots, seg["s0"][order], seg["s1"][order], (seg["t1"] - seg["t0"])[order])
+    if scene.shading:   # each cell lit with its own gradient: a diffuse factor and a specular term
+        from ..techniques.tetra import cell_fields
+        from .shading import gradient_epsilon, phong_terms, scene_lights
+        grads = cell_fields(scene.volume)[seg["tet"][order], 0, :3]
+        dirs = scene.camera.rays(W, H)[1].reshape(-1, 3)[pix]
+        diffuse, specular = phong_terms(grads, dirs, scene.phong, gradient_epsilon(scene.volume), scene_lights(scene))
+        rgba[:, :3] = rgba[:, :3] * diffuse[:, None] + (specular * rgba[:, 3])[:, None]
     # layer k of a pixel is its k-th fragment in draw order; blend layer by layer
     first = np.concatenate([[0], np.flatnonzero(pix[1:] != pix[:-1]) + 1])
     counts = np.diff(np.concatenate([first, [pix.size]]))

@@ -13,7 +13,8 @@ from ..scene import MAX_LIGHTS, OPTICAL_MODELS, Scene
 TARGETS = {"rgba32f": "f4", "rgba16f": "f2", "rgba8": "f1"}
 
 
-SHADING_TECHNIQUES = ("raycast", "slice3d", "slice2d")   # those that light composite samples
+SHADING_TECHNIQUES = ("raycast", "slice3d", "slice2d")   # those with every sample term and optical model
+LIGHTING_TECHNIQUES = SHADING_TECHNIQUES + ("tetra",)    # those that light composite samples
 GRADIENTS = ("on_the_fly", "texture")
 
 
@@ -26,9 +27,9 @@ def check_scene(scene, technique, modes=None, data="volume"):
     if scene.illustration and technique not in SHADING_TECHNIQUES:
         raise ValueError(f"{technique} has no illustration terms yet: they are rendered by "
                          f"{', '.join(SHADING_TECHNIQUES)}")
-    if scene.shading and technique not in SHADING_TECHNIQUES:
+    if scene.shading and technique not in LIGHTING_TECHNIQUES:
         raise ValueError(f"{technique} does not light samples yet: shading=True is rendered by "
-                         f"{', '.join(SHADING_TECHNIQUES)}")
+                         f"{', '.join(LIGHTING_TECHNIQUES)}")
     if scene.optical_model == "sabella" and technique != "raycast":
         raise ValueError(f"{technique} composites segments in GL's blending, which cannot follow a ray's peak: "
                          f"optical_model 'sabella' is rendered by raycast")
@@ -199,19 +200,28 @@ def add_optional_inputs(renderer, plan, textures, uniforms):
     if scene.volume.has_nonfinite:
         textures["t_cell_valid"] = renderer.cell_valid_texture(scene.volume)
     if (scene.shaded or scene.illustration) and not scene.is_mesh:
-        uniforms["u_phong"] = scene.phong
         uniforms["u_gradient_epsilon"] = gradient_epsilon(scene.volume)
         uniforms.update(illustration_uniforms(renderer, scene))
         if plan.defines.get("GRADIENT_TEXTURE"):
             textures["t_gradient"] = gradient_texture(renderer, scene.volume)
-        if plan.defines.get("LIGHTS"):
-            lights = np.zeros((MAX_LIGHTS, 4), np.float32)
-            for row, light in zip(lights, scene.lights):
-                direction = light.world_direction(scene.camera)
-                row[:3] = 0.0 if direction is None else direction
-                row[3] = light.intensity
-            uniforms["u_light_count"] = len(scene.lights)
-            uniforms["u_lights"] = [tuple(row) for row in lights.tolist()]
+    if scene.shaded:
+        uniforms.update(light_uniforms(scene, plan.defines))
+
+
+def light_uniforms(scene, defines):
+    """Uniforms of the lights in shaders/common/shading.glsl (and the gradient threshold of
+    a mesh, whose cells carry their own gradients)."""
+    from ..reference.shading import gradient_epsilon
+    out = {"u_phong": scene.phong, "u_gradient_epsilon": gradient_epsilon(scene.volume)}
+    if defines.get("LIGHTS"):
+        lights = np.zeros((MAX_LIGHTS, 4), np.float32)
+        for row, light in zip(lights, scene.lights):
+            direction = light.world_direction(scene.camera)
+            row[:3] = 0.0 if direction is None else direction
+            row[3] = light.intensity
+        out["u_light_count"] = len(scene.lights)
+        out["u_lights"] = [tuple(row) for row in lights.tolist()]
+    return out
 
 
 def bind(prog, textures, uniforms):

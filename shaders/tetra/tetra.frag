@@ -25,8 +25,15 @@
 #define MODE_AVERAGE 0
 #endif
 
+#ifndef SHADING
+#define SHADING 0
+#endif
+
 #include "common/camera_ray.glsl"
 #include "common/linear_segment.glsl"
+#if SHADING
+#include "common/shading.glsl"
+#endif
 
 flat in mat3x4 v_normals;      // the cell's outward plane normals, by component (tetra.vert)
 flat in vec4 v_room;           // plane offsets from the eye: d - n . eye
@@ -88,5 +95,12 @@ void main() {
     frag_color = vec4(0.5 * (s_front + s_back) * len, len, 0.0, 1.0);  // blended by addition
 #else
     frag_color = linearSegment(s_front, s_back, t_out - t_in);
+  #if SHADING
+    // the cell's gradient is constant, so are its lights along the segment: the lit
+    // colour integral is the unlit one times the diffuse factor plus the specular
+    // term times the segment's opacity
+    vec2 k = phongTerms(v_field.xyz, dir);
+    frag_color.rgb = frag_color.rgb * k.x + k.y * frag_color.a;
+  #endif
 #endif
 }
