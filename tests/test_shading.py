@@ -357,10 +357,11 @@ def test_shading_is_refused_where_it_is_not_defined():
     mesh = dvr_gl.TetMesh(points, np.array([[0, 1, 2, 3]]), np.array([0.0, 1.0, 2.0, 3.0]))
     mesh_scene = dvr_gl.Scene(mesh, TF, dvr_gl.default_camera(mesh), width=16, height=16, shading=True)
     assert get_technique("tetra").make_plan(mesh_scene).defines.get("SHADING") == 1   # cells light
-    with pytest.raises(ValueError, match="tetra has no illustration terms yet"):
-        get_technique("tetra").make_plan(mesh_scene.replace(illustration="tone"))
-    with pytest.raises(ValueError, match="a TetMesh scene takes lighting only"):
-        reference.exact(mesh_scene.replace(illustration="tone"), cache=False)
+    assert get_technique("tetra").make_plan(mesh_scene.replace(illustration="tone")).defines.get("TONE") == 1
+    with pytest.raises(ValueError, match="depth_cue varies along a segment"):
+        get_technique("tetra").make_plan(mesh_scene.replace(illustration="depth_cue"))
+    with pytest.raises(ValueError, match="depth_cue is defined for grids here"):
+        reference.exact(mesh_scene.replace(illustration="depth_cue"), cache=False)
 
 
 # -- meshes: each cell lit with its own (constant) gradient ----------------------------------
@@ -412,5 +413,45 @@ def test_a_lit_mesh_matches_its_reference(renderer):
     ka, kd, ks, n = scene.phong
     bound = GL_TOL * (ka + (kd + ks) * 1.5) + 1.5 * (kd + ks * n) * 4e-7
     assert metrics.max_abs_error(gl, renderer.render(scene.replace(shading=False), "tetra")) > 0.05
+    assert metrics.max_abs_error(gl, ref) <= bound
+    assert metrics.max_abs_error(ref, reference.exact(scene, cache=False)) <= bound
+
+
+@pytest.mark.parametrize("term", ["boundary", "silhouette"])
+def test_a_mesh_cells_extinction_scale_is_a_shorter_unit_distance(renderer, term):
+    """The linear blocks, orthographic: |g| is the slope (the largest gradient) in every
+    cell and |n.V| one number, so the scale m is one number: the image is the plain one
+    with unit distance u / m (exact to 1e-11; GL to float32 over at most 12 cells)."""
+    mesh = linear_blocks()
+    lo, hi = mesh.bounds
+    centre = (lo + hi) / 2
+    camera = dvr_gl.Camera(centre + np.array([20.0, 9.0, 15.0]), centre, ortho_height=6.0)
+    kc, ks, ke = 0.3, 0.9, 2.0
+    m = kc + ks * (1.0 if term == "boundary" else (1 - abs(camera.forward[0]))) ** ke
+    scene = dvr_gl.Scene(mesh, MESH_TF, camera, width=W, height=H, illustration={term: (kc, ks, ke)})
+    tf_short = dvr_gl.TransferFunction(MESH_TF.color_points, MESH_TF.opacity_points,
+                                       unit_distance=MESH_TF.unit_distance / m)
+    shorter = scene.replace(tf=tf_short, illustration=None)
+    expected = reference.exact(shorter, cache=False)
+    assert expected[..., 3].max() > 0.3
+    np.testing.assert_allclose(reference.exact(scene, cache=False), expected, rtol=0, atol=1e-11)
+    assert metrics.max_abs_error(renderer.render(scene, "tetra"), renderer.render(shorter, "tetra")) <= 64 * U32 * 12
+
+
+def test_mesh_tone_and_terms_match_the_reference(renderer):
+    """Tone, boundary and silhouette with the light on the Delaunay ball: GL against the
+    reference (as the lit case, with the extinction scale's float32 error), and the
+    reference against the exact image."""
+    from dvr_gl.data import delaunay_ball, synthetic_tf
+    from test_tetra import GL_TOL
+    mesh = delaunay_ball()
+    scene = dvr_gl.Scene(mesh, synthetic_tf(), dvr_gl.default_camera(mesh, azimuth=30, elevation=20), width=48,
+                         height=48, shading=True, illustration=("boundary", "silhouette", "tone"))
+    gl = renderer.render(scene, "tetra")
+    ref = reference.render(scene, "tetra")
+    ka, kd, ks, n = scene.phong
+    colour = ka + kd + ks + 0.4      # the brightest lit colour plus the tone's warmest channel
+    bound = GL_TOL * colour + (kd + ks * n) * 4e-7 + (2 * colour + 1 / math.e) * 1e-6
+    assert metrics.max_abs_error(gl, renderer.render(scene.replace(illustration=None), "tetra")) > 0.02
     assert metrics.max_abs_error(gl, ref) <= bound
     assert metrics.max_abs_error(ref, reference.exact(scene, cache=False)) <= bound

@@ -61,7 +61,7 @@ import numpy as np
 
 from ..scene import Scene
 from .common import ray_box
-from .shading import gradient, gradient_epsilon, phong_terms, sample_terms, scene_lights, shade_blinn_phong
+from .shading import gradient, gradient_epsilon, sample_terms, scene_lights, shade_blinn_phong
 
 __all__ = ["exact", "VERSION"]
 
@@ -438,6 +438,7 @@ class _Classified:
         if geo is not None and "factor" in geo:      # constant over the piece
             factor = np.broadcast_to(geo["factor"][:, None], x.shape)
             offset = np.broadcast_to(geo["offset"][:, None, :], x.shape + (3,))
+            tau = tau * geo["scale"][:, None]
         elif geo is not None:
             points = geo["base"][:, None, :] + x[..., None] * geo["hd"][:, None, :]
             factor, offset, scale = self.lighting(points, geo["dir"][:, None, :])
@@ -735,11 +736,15 @@ class _MeshExact(_Classified):
         super().__init__(scene.tf, scene.optical_model)
         self.scene = scene
         self.mesh = scene.volume
-        if scene.shading and scene.mode == "composite":
+        self.terms = sample_terms(scene, None)
+        if self.terms is not None:
             from ..techniques.tetra import cell_fields
             self.gradients = cell_fields(self.mesh)[:, 0, :3]
             self.dirs = scene.camera.rays(scene.width, scene.height)[1].reshape(-1, 3)
-            self.piece_keys = ("factor", "offset")
+            self.piece_keys = ("factor", "offset", "scale")
+            for name in ("boundary", "silhouette"):
+                if name in scene.illustration:
+                    self.scale_floor *= min(scene.illustration[name][0], 1.0)
 
     @staticmethod
     def _pieces(seg, idx, rows):
@@ -771,11 +776,10 @@ class _MeshExact(_Classified):
                 a, rows = np.unique(ray[idx], return_inverse=True)
                 T = np.exp(-od[a])
                 P = self._pieces(seg, idx, rows)
-                if self.piece_keys:     # lit: each cell's lights are constant along its piece
-                    P["factor"], specular = phong_terms(self.gradients[seg["tet"][idx]], self.dirs[seg["pixel"][idx]],
-                                                        self.scene.phong, gradient_epsilon(self.mesh),
-                                                        scene_lights(self.scene))
-                    P["offset"] = np.repeat(specular[:, None], 3, axis=1)
+                if self.piece_keys:     # each cell's terms are constant along its piece
+                    dirs = self.dirs[seg["pixel"][idx]]
+                    P["factor"], P["offset"], P["scale"] = self.terms.at(
+                        np.zeros_like(dirs), dirs, grad=self.gradients[seg["tet"][idx]])
                 OD, C, term = self.window(P, T, len(a))
                 col[a] += T[:, None] * C
                 if not self.emission:
@@ -979,9 +983,9 @@ def exact(scene, cache=True, cache_dir=None) -> np.ndarray:
         raise TypeError(f"scene must be a dvr_gl.Scene, got {type(scene).__name__}")
     if scene.is_mesh and scene.optical_model == "sabella":
         raise ValueError("optical_model='sabella' is defined here for grids (the peak of the trilinear field)")
-    if scene.is_mesh and scene.illustration:
-        raise ValueError("illustration terms are defined for grids here (central differences one spacing "
-                         "apart); a TetMesh scene takes lighting only, with each cell's own gradient")
+    if scene.is_mesh and "depth_cue" in scene.illustration:
+        raise ValueError("depth_cue is defined for grids here; a TetMesh scene takes lighting, boundary, "
+                         "silhouette and tone, with each cell's own gradient")
     path = None
     if cache:
         directory = _cache_dir(cache_dir)

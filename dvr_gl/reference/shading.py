@@ -109,9 +109,14 @@ def gradient_epsilon(volume):
     return 1e-6 * scale / length
 
 
-def gradient_max(volume, values):
+def gradient_max(volume, values=None):
     """The largest |g| anywhere in the box: the gradient interpolates the samples'
-    gradients, and a norm of a convex combination is at most the largest norm."""
+    gradients, and a norm of a convex combination is at most the largest norm. A
+    TetMesh: its cells' largest (constant) gradient."""
+    if hasattr(volume, "tets"):
+        from ..techniques.tetra import cell_fields
+        return float(np.linalg.norm(cell_fields(volume)[:, 0, :3], axis=-1).max())
+    values = volume.values(np.float64) if values is None else values
     return float(np.linalg.norm(sample_gradients(volume, values), axis=-1).max())
 
 
@@ -147,14 +152,19 @@ class SampleTerms:
         self.g_max = gradient_max(self.volume, values) if "boundary" in self.terms else 1.0
         self.depths = depth_range(scene) if "depth_cue" in self.terms else None
 
-    def at(self, points, dirs):
+    def at(self, points, dirs, grad=None):
+        """(factor, offset, scale) at ``points`` seen along ``dirs``; ``grad`` gives the
+        gradients instead of reading them (a mesh's cells)."""
         points = np.asarray(points, np.float64)
         shape = points.shape[:-1]
         dirs = np.broadcast_to(dirs, points.shape)
         factor = np.ones(shape)
         offset = np.zeros(shape + (3,))
         scale = np.ones(shape)
-        g = gradient(self.volume, self.values, points) if self.needs_gradient else None
+        if grad is not None:
+            g = np.broadcast_to(grad, points.shape)
+        else:
+            g = gradient(self.volume, self.values, points) if self.needs_gradient else None
         if g is not None:
             length = np.linalg.norm(g, axis=-1)
             ok = length > self.epsilon

@@ -16,6 +16,7 @@ import numpy as np
 from .common import blend_over
 from .linear_segment import linear_segment
 from .mesh_rays import ray_tet_segments, union_segments
+from .shading import sample_terms
 
 
 def render_plan(plan, lut_exact=False):
@@ -34,14 +35,17 @@ def render_plan(plan, lut_exact=False):
     r = rank[seg["tet"]]
     order = np.lexsort((r, seg["pixel"]))              # per pixel, in draw order (back first)
     pix = seg["pixel"][order]
-    rgba = linear_segment(plan.knots, seg["s0"][order], seg["s1"][order], (seg["t1"] - seg["t0"])[order])
-    if scene.shading:   # each cell lit with its own gradient: a diffuse factor and a specular term
+    length = (seg["t1"] - seg["t0"])[order]
+    terms = sample_terms(scene, None)
+    if terms is None:
+        rgba = linear_segment(plan.knots, seg["s0"][order], seg["s1"][order], length)
+    else:   # each cell's terms are constant (its gradient is): see shaders/tetra/tetra.frag
         from ..techniques.tetra import cell_fields
-        from .shading import gradient_epsilon, phong_terms, scene_lights
         grads = cell_fields(scene.volume)[seg["tet"][order], 0, :3]
         dirs = scene.camera.rays(W, H)[1].reshape(-1, 3)[pix]
-        diffuse, specular = phong_terms(grads, dirs, scene.phong, gradient_epsilon(scene.volume), scene_lights(scene))
-        rgba[:, :3] = rgba[:, :3] * diffuse[:, None] + (specular * rgba[:, 3])[:, None]
+        factor, offset, scale = terms.at(np.zeros_like(dirs), dirs, grad=grads)
+        rgba = linear_segment(plan.knots, seg["s0"][order], seg["s1"][order], length * scale)
+        rgba[:, :3] = rgba[:, :3] * factor[:, None] + offset * rgba[:, 3:4]
     # layer k of a pixel is its k-th fragment in draw order; blend layer by layer
     first = np.concatenate([[0], np.flatnonzero(pix[1:] != pix[:-1]) + 1])
     counts = np.diff(np.concatenate([first, [pix.size]]))

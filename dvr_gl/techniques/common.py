@@ -25,8 +25,12 @@ def check_scene(scene, technique, modes=None, data="volume"):
     if not isinstance(scene, Scene):
         raise TypeError(f"scene must be a dvr_gl.Scene, got {type(scene).__name__}")
     if scene.illustration and technique not in SHADING_TECHNIQUES:
-        raise ValueError(f"{technique} has no illustration terms yet: they are rendered by "
-                         f"{', '.join(SHADING_TECHNIQUES)}")
+        if technique == "tetra" and "depth_cue" in scene.illustration:
+            raise ValueError("tetra's cells take boundary, silhouette and tone (constant in a linear cell); "
+                             "depth_cue varies along a segment: render it with raycast, slice3d or slice2d")
+        if technique != "tetra":
+            raise ValueError(f"{technique} has no illustration terms yet: they are rendered by "
+                             f"{', '.join(SHADING_TECHNIQUES)} (tetra: boundary, silhouette, tone)")
     if scene.shading and technique not in LIGHTING_TECHNIQUES:
         raise ValueError(f"{technique} does not light samples yet: shading=True is rendered by "
                          f"{', '.join(LIGHTING_TECHNIQUES)}")
@@ -182,8 +186,7 @@ def illustration_uniforms(renderer, scene):
     if "boundary" in terms:
         volume = scene.volume
         out["u_boundary"] = terms["boundary"]
-        out["u_gradient_max"] = renderer.tables.get("gradient_max", volume,
-                                                    make=lambda v: gradient_max(v, v.values(np.float64)))
+        out["u_gradient_max"] = renderer.tables.get("gradient_max", volume, make=gradient_max)
     if "silhouette" in terms:
         out["u_silhouette"] = terms["silhouette"]
     return out

@@ -48,7 +48,7 @@ from ..cache import TableCache
 from ..mesh import LOCAL_FACES, Order, centroid_order, mpvo_order, topology, visible_cells
 from ..reference.linear_segment import SegmentKnots
 from ..scene import Scene
-from .common import (light_uniforms, cleared_target, SizedTarget, bind, camera_uniforms, check_scene, check_target, data_projection,
+from .common import (illustration_uniforms, light_uniforms, cleared_target, SizedTarget, bind, camera_uniforms, check_scene, check_target, data_projection,
                      grow_pixels, knot_uniforms)
 
 MODES = ("composite", "mip", "minip", "average")
@@ -124,10 +124,13 @@ def make_plan(scene, step=None, *, sort="mpvo", target="rgba32f", tables=None):
     defines = {"KNOT_CAPACITY": knot_capacity(knots.count)}
     if scene.camera.is_ortho:
         defines["ORTHO"] = 1
-    if scene.shading:
-        defines["SHADING"] = 1   # each cell lit with its own (constant) gradient
-        if not scene.headlight_only:
-            defines["LIGHTS"] = 1
+    if scene.shading or scene.illustration:   # terms of each cell's own (constant) gradient
+        defines["SAMPLE_TERMS"] = 1
+        defines.update({name.upper(): 1 for name in scene.illustration})
+        if scene.shading:
+            defines["SHADING"] = 1
+            if not scene.headlight_only:
+                defines["LIGHTS"] = 1
     return TetraPlan(scene=scene, knots=knots, visible=visible, order=result, draw=draw, sort=sort,
                      target=target, defines=defines, sort_seconds=timing.get("sort", 0.0),
                      behind_eye=reaches_behind_eye(scene, draw))
@@ -265,8 +268,9 @@ def draw(renderer, plan):
     uniforms = {**camera_uniforms(scene), "u_knot_count": plan.knots.count, "u_inv_unit": plan.knots.inv_unit,
                 "u_target_size": scene.target_size,
                 "u_centre": data.centre}
-    if scene.shading:
+    if scene.shading or scene.illustration:
         uniforms.update(light_uniforms(scene, plan.defines))
+        uniforms.update(illustration_uniforms(renderer, scene))
     bind(prog, textures, uniforms)
     knot_uniforms(prog, plan.knots, plan.defines["KNOT_CAPACITY"])
     prog["u_view_proj"].write(view_proj)

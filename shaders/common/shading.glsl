@@ -121,14 +121,13 @@ uniform float u_gradient_max;
 uniform vec3 u_silhouette;   // k_sc, k_ss, k_se
 #endif
 
-// The terms at a sample: its colour becomes color * factor + offset, its extinction is
-// multiplied by opacity_scale.
-void termsAt(vec3 p_world, vec3 ray_dir, out float factor, out vec3 offset, out float opacity_scale) {
+// The terms at a sample with gradient g: its colour becomes color * factor + offset, its
+// extinction is multiplied by opacity_scale. (A mesh's cell passes its own gradient.)
+void termsFor(vec3 g, vec3 p_world, vec3 ray_dir, out float factor, out vec3 offset, out float opacity_scale) {
     factor = 1.0;
     offset = vec3(0.0);
     opacity_scale = 1.0;
 #if NEEDS_GRADIENT
-    vec3 g = gradient(p_world);
     float len = length(g);
     bool oriented = len > u_gradient_epsilon;
     vec3 n = oriented ? g / len : vec3(0.0);
@@ -160,6 +159,15 @@ void termsAt(vec3 p_world, vec3 ray_dir, out float factor, out vec3 offset, out 
     float cue = 1.0 - u_depth_cue.z * u;
     factor *= cue;
     offset *= cue;
+#endif
+}
+
+// The terms at a sample of the volume: its gradient read there (only when a term needs it).
+void termsAt(vec3 p_world, vec3 ray_dir, out float factor, out vec3 offset, out float opacity_scale) {
+#if NEEDS_GRADIENT
+    termsFor(gradient(p_world), p_world, ray_dir, factor, offset, opacity_scale);
+#else
+    termsFor(vec3(0.0), p_world, ray_dir, factor, offset, opacity_scale);
 #endif
 }
 

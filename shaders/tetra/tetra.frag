@@ -25,13 +25,13 @@
 #define MODE_AVERAGE 0
 #endif
 
-#ifndef SHADING
-#define SHADING 0
+#ifndef SAMPLE_TERMS
+#define SAMPLE_TERMS 0   // lights or illustration terms, each constant in a cell
 #endif
 
 #include "common/camera_ray.glsl"
 #include "common/linear_segment.glsl"
-#if SHADING
+#if SAMPLE_TERMS
 #include "common/shading.glsl"
 #endif
 
@@ -94,13 +94,18 @@ void main() {
     float len = t_out - t_in;
     frag_color = vec4(0.5 * (s_front + s_back) * len, len, 0.0, 1.0);  // blended by addition
 #else
+  #if SAMPLE_TERMS
+    // the cell's gradient is constant, so are its terms along the segment: an extinction
+    // scale m is the same integral over a segment m times as long (s still linear along
+    // it), and the colour integral is the plain one times the factor plus the added
+    // colour times the segment's opacity
+    float factor, scale;
+    vec3 added;
+    termsFor(v_field.xyz, origin, dir, factor, added, scale);
+    frag_color = linearSegment(s_front, s_back, (t_out - t_in) * scale);
+    frag_color.rgb = frag_color.rgb * factor + added * frag_color.a;
+  #else
     frag_color = linearSegment(s_front, s_back, t_out - t_in);
-  #if SHADING
-    // the cell's gradient is constant, so are its lights along the segment: the lit
-    // colour integral is the unlit one times the diffuse factor plus the specular
-    // term times the segment's opacity
-    vec2 k = phongTerms(v_field.xyz, dir);
-    frag_color.rgb = frag_color.rgb * k.x + k.y * frag_color.a;
   #endif
 #endif
 }
