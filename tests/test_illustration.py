@@ -235,3 +235,27 @@ def test_terms_are_refused_where_they_are_not_defined():
     # colour-only terms do combine with pre-integration
     toned = scene.replace(illustration="tone")
     assert get_technique("raycast").make_plan(toned, preintegrate=True).defines.get("TONE") == 1
+
+
+def test_the_variants_compiled_and_the_textures_made_are_exactly_what_the_scenes_use():
+    """A fresh renderer, four scenes in turn: each compiles the one variant its terms name
+    and makes only the textures it reads (the gradient texture only for a lit scene that
+    asks for it; the volume, table and brick occupancy once)."""
+    from dvr_gl import Renderer
+    camera = cameras(RAMP)["perspective"]
+    base = dvr_gl.Scene(RAMP, TF, camera, width=16, height=16)
+    plain = {"MODE_COMPOSITE": 1, "SKIP_EMPTY": 1, "EARLY_RAY_TERMINATION": 1}
+    steps = [(base, {}, plain, {"volume", "tf", "occupancy", "target"}),
+             (base.replace(shading=True), {}, {**plain, "SAMPLE_TERMS": 1, "SHADING": 1}, set()),
+             (base.replace(shading=True), {"gradients": "texture"},
+              {**plain, "SAMPLE_TERMS": 1, "SHADING": 1, "GRADIENT_TEXTURE": 1}, {"gradient"}),
+             (base.replace(illustration="tone"), {}, {**plain, "SAMPLE_TERMS": 1, "TONE": 1}, set())]
+    with Renderer() as r:
+        seen = set()
+        for scene, opts, defines, textures in steps:
+            before = len(r.created)
+            r.render(scene, step=0.7, **opts)
+            compiled = {dict(key[2]).__repr__() for key in r.programs.sources if key[1] == "raycast/raycast.frag"}
+            assert compiled - seen == {repr(dict(sorted(defines.items())))}, (compiled - seen, defines)
+            seen |= compiled
+            assert {kind for kind, _ in r.created[before:]} == textures
