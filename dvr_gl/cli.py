@@ -175,6 +175,7 @@ def cmd_info_file(args, out=None):
     values = data.scalars if mesh else data.data
     print("histogram  " + text_histogram(values) + f"  ({data.data_range[0]:g} to {data.data_range[1]:g}, "
           "32 bins, height ~ log count)", file=out)
+    from .transfer import auto_preset_name
     name = preset if preset != "auto" else f"auto: {auto_preset_name(data)}"
     print(f"preset     {_describe_tf(name, PRESETS[preset](data))} (what render uses without --tf)", file=out)
     return 0
@@ -209,11 +210,6 @@ def _reason(exc):
     return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
 
 
-def auto_preset_name(data):
-    from .transfer import auto_preset_name as name
-    return name(data)
-
-
 def _describe_tf(name, tf):
     lo, hi = float(tf.knots[0]), float(tf.knots[-1])
     return f"{name} ({lo:g}..{hi:g}, unit distance {tf.unit_distance:g})"
@@ -223,6 +219,7 @@ def cmd_render(args, out=None):
     out = out or sys.stdout
     from .inputs import FIRST_AZIMUTH, FIRST_ELEVATION, first_camera, shading_for
     from .scene import Scene
+    from .techniques.common import LIGHTING_TECHNIQUES, SHADING_TECHNIQUES
 
     check_png(args.out)
     check_technique(args.technique)
@@ -234,15 +231,15 @@ def cmd_render(args, out=None):
         raise UsageError("--iso", f"is only used with --mode isosurface, not --mode {mode}")
     if args.shading and mode not in ("composite", "isosurface"):
         raise UsageError("--shading", f"lights composite samples (isosurfaces always are), not --mode {mode}")
-    if args.shading and args.technique not in ("raycast", "slice2d", "slice3d", "tetra"):
-        raise UsageError("--shading", f"applies to --technique raycast, slice3d, slice2d or tetra, "
+    if args.shading and args.technique not in LIGHTING_TECHNIQUES:
+        raise UsageError("--shading", f"applies to --technique {', '.join(LIGHTING_TECHNIQUES)}, "
                                       f"not {args.technique}")
     if args.optical_model not in (None, "emission_absorption"):
         if args.optical_model == "sabella" and args.technique != "raycast":
             raise UsageError("--optical-model", f"sabella applies to --technique raycast, not {args.technique}")
-        if args.technique not in ("raycast", "slice2d", "slice3d"):
-            raise UsageError("--optical-model", f"{args.optical_model} applies to --technique raycast, slice3d or "
-                                                f"slice2d, not {args.technique}")
+        if args.technique not in SHADING_TECHNIQUES:
+            raise UsageError("--optical-model", f"{args.optical_model} applies to --technique "
+                                                f"{', '.join(SHADING_TECHNIQUES)}, not {args.technique}")
         if args.preintegrate:
             raise UsageError("--optical-model", f"{args.optical_model} is sampled at segment midpoints; "
                                                 "leave out --preintegrate")
@@ -275,9 +272,10 @@ def cmd_render(args, out=None):
     if args.illustration:
         if mode != "composite":
             raise UsageError("--illustration", f"applies to --mode composite, not --mode {mode}")
-        if args.technique not in ("raycast", "slice2d", "slice3d"):
-            raise UsageError("--illustration", f"applies to --technique raycast, slice3d or slice2d, "
-                                               f"not {args.technique}")
+        cell_terms = args.technique == "tetra" and "depth_cue" not in args.illustration
+        if args.technique not in SHADING_TECHNIQUES and not cell_terms:
+            raise UsageError("--illustration", f"applies to --technique {', '.join(SHADING_TECHNIQUES)} "
+                                               f"(tetra: boundary, silhouette, tone), not {args.technique}")
         if args.preintegrate and {"boundary", "silhouette"} & set(args.illustration):
             raise UsageError("--illustration", "boundary and silhouette scale the extinction per sample; "
                                                "leave out --preintegrate")
@@ -288,7 +286,7 @@ def cmd_render(args, out=None):
     except ValueError as e:
         if not optical:
             raise
-        raise UsageError("--optical-model", str(e)) from None
+        raise UsageError("--optical-model" if args.optical_model else "--illustration", str(e)) from None
     if getattr(args, "transparent", False):
         if args.background is not None:
             raise UsageError("--transparent", "writes RGBA; it takes no --background")

@@ -39,7 +39,7 @@ PRESETS = {
     "coolwarm": lambda data: _transfer().ramp_preset(data, _transfer().RAMPS["coolwarm"]),
     "grey": lambda data: _transfer().ramp_preset(data, _transfer().RAMPS["grey"]),
     **{name: (lambda data, name=name: _transfer().colormap_preset(data, name))
-       for name in ("viridis", "magma", "inferno", "plasma", "cividis", "gray", "bone")},
+       for name in _transfer().COLORMAPS},
     "ct_head": lambda data: _data().ct_head_tf(),
     "synthetic": lambda data: _data().synthetic_tf(),
 }

@@ -35,6 +35,7 @@ ILLUSTRATION_TERMS = {
     "tone": ((0.4, 0.4, 0.0), (0.0, 0.0, 0.4)),       # warm, cool (RGB)
     "depth_cue": (0.6,),                              # strength
 }
+GRADIENT_TERMS = ("boundary", "silhouette", "tone")   # the terms that read the gradient
 
 
 def _illustration(value):
@@ -631,6 +632,11 @@ class Scene:
     def headlight_only(self):
         """True for the contract's default light: one headlight of intensity 1."""
         return len(self.lights) == 1 and self.lights[0].is_headlight and self.lights[0].intensity == 1.0
+
+    @property
+    def reads_gradient(self):
+        """Whether samples read the gradient: lit, or an illustration term that does."""
+        return self.shaded or any(name in self.illustration for name in GRADIENT_TERMS)
 
     @property
     def shaded(self):

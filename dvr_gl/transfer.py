@@ -120,7 +120,7 @@ def window(data, lo_pct=1.0, hi_pct=99.0):
     values, _ = _sample_values(data)
     lo, hi = (float(v) for v in np.percentile(values, [lo_pct, hi_pct]))
     if hi <= lo:
-        lo, hi = data.data_range if not isinstance(data, TetMesh) else (float(values.min()), float(values.max()))
+        lo, hi = data.data_range
         if hi <= lo:
             hi = lo + 1.0
     return lo, hi
@@ -190,13 +190,14 @@ def auto_preset(volume, unit_distance=None) -> TransferFunction:
     """The preset the data suggests: CT in Hounsfield units gets ``ct``; a volume with an
     anatomical orientation (an MRI from NIfTI or NRRD) ``mr``; a mesh the ``coolwarm``
     ramp over the 1st to 99th percentile; anything else the ``warm`` ramp (dark red to
-    ivory) from the median to the 99.5th percentile; opacity rising from 0 to 0.5. Unit distance one voxel (the smallest
-    spacing; a mesh: the median edge length) unless given."""
-    if unit_distance is None and not isinstance(volume, TetMesh):
-        if looks_like_hu(volume):
-            return ct_preset(volume)
-        if getattr(volume, "orientation", None) is not None:
-            return mr_preset(volume)
+    ivory) from the median to the 99.5th percentile; opacity rising from 0 to 0.5. Unit
+    distance one voxel (the smallest spacing; a mesh: the median edge length); a given
+    ``unit_distance`` keeps to the ramps."""
+    name = auto_preset_name(volume)
+    if name == "ct" and unit_distance is None:
+        return ct_preset(volume)
+    if name == "mr" and unit_distance is None:
+        return mr_preset(volume)
     if isinstance(volume, TetMesh):
         return ramp_preset(volume, RAMPS["coolwarm"], unit_distance=unit_distance)
     # a scan's lower half is mostly background or noise: the ramp starts at the median

@@ -491,9 +491,7 @@ class _Exact(_Classified):
         if terms is not None:
             self.lighting = terms.at
             self.piece_keys = ("base", "hd", "dir")
-            for name in ("boundary", "silhouette"):
-                if name in scene.illustration:
-                    self.scale_floor *= min(scene.illustration[name][0], 1.0)
+            self.scale_floor = terms.scale_floor
 
     # -- traversal ------------------------------------------------------------
     def pieces(self, o, d, tcur, t1, M):
@@ -742,9 +740,7 @@ class _MeshExact(_Classified):
             self.gradients = cell_fields(self.mesh)[:, 0, :3]
             self.dirs = scene.camera.rays(scene.width, scene.height)[1].reshape(-1, 3)
             self.piece_keys = ("factor", "offset", "scale")
-            for name in ("boundary", "silhouette"):
-                if name in scene.illustration:
-                    self.scale_floor *= min(scene.illustration[name][0], 1.0)
+            self.scale_floor = self.terms.scale_floor
 
     @staticmethod
     def _pieces(seg, idx, rows):
@@ -831,15 +827,11 @@ class _MeshExact(_Classified):
 
     def shade(self, cells, dirs):
         """Shading with the tet's own gradient (the field is linear in each tet; the
-        contract's central differences are a grid's). Threshold: 1e-6 * (data range) /
-        (median edge length)."""
+        contract's central differences are a grid's), threshold ``gradient_epsilon``."""
+        from ..techniques.tetra import cell_fields
         c = np.broadcast_to(self.tf.color(self.scene.iso_value), dirs.shape)
-        p = self.mesh.points[self.mesh.tets[cells]]
-        s = self.mesh.scalars[self.mesh.tets[cells]]
-        g = np.linalg.solve(p[:, 1:] - p[:, :1], (s[:, 1:] - s[:, :1])[..., None])[..., 0]
-        lo, hi = self.mesh.data_range
-        return shade_blinn_phong(c, g, dirs, self.scene.phong, 1e-6 * (hi - lo) / self.mesh.cell_size,
-                                 scene_lights(self.scene))
+        g = cell_fields(self.mesh)[cells, 0, :3]
+        return shade_blinn_phong(c, g, dirs, self.scene.phong, gradient_epsilon(self.mesh), scene_lights(self.scene))
 
 
 def _classify(tf, s):

@@ -88,15 +88,6 @@ def shade_blinn_phong(color, grad, ray_dir, phong, epsilon, lights=None):
     return color * diffuse[..., None] + specular[..., None]
 
 
-def shade_segment(segment, grad, ray_dir, phong, epsilon, lights=None):
-    """Premultiplied segments (..., 4), (c * alpha, alpha), lit: the lit colour associated
-    with alpha (GLSL ``shadeSegment``)."""
-    diffuse, specular = phong_terms(grad, ray_dir, phong, epsilon, lights)
-    out = np.array(segment, np.float64, copy=True)
-    out[..., :3] = segment[..., :3] * diffuse[..., None] + (specular * segment[..., 3])[..., None]
-    return out
-
-
 def gradient_epsilon(volume):
     """|g| at or below this is 'below a small threshold' (contract section 6):
     1e-6 * (data range) / (min spacing). A constant volume has no range; there the scale
@@ -148,9 +139,12 @@ class SampleTerms:
         self.lights = scene_lights(scene)
         first = scene.lights[0]
         self.tone_light = first.world_direction(scene.camera)
-        self.needs_gradient = self.lit or bool({"boundary", "silhouette", "tone"} & set(self.terms))
+        self.needs_gradient = scene.reads_gradient
         self.g_max = gradient_max(self.volume, values) if "boundary" in self.terms else 1.0
         self.depths = depth_range(scene) if "depth_cue" in self.terms else None
+        # a lower bound of the extinction scale: the constant terms (at most 1 each)
+        self.scale_floor = float(np.prod([min(self.terms[name][0], 1.0) for name in ("boundary", "silhouette")
+                                          if name in self.terms]))
 
     def at(self, points, dirs, grad=None):
         """(factor, offset, scale) at ``points`` seen along ``dirs``; ``grad`` gives the
@@ -206,7 +200,7 @@ class RayLighting:
     """A scene's ``SampleTerms`` along some rays ``origins + t * dirs`` (box-relative, one
     per row): ``samples(rgb, t)`` for straight colours of samples at ray distances ``t``
     (GLSL ``sampleTerms``), ``segments(seg, t)`` for premultiplied (pre-integrated)
-    segments there (GLSL ``shadeSegment``)."""
+    segments there (GLSL ``litSegment``)."""
 
     def __init__(self, terms, origins, dirs):
         self.terms, self.origins, self.dirs = terms, origins, dirs
@@ -226,7 +220,6 @@ class RayLighting:
         out = np.array(seg, np.float64, copy=True)
         out[:, :3] = seg[:, :3] * factor[:, None] + offset * seg[:, 3:4]
         return np.where(seg[:, 3:4] > 0, out, seg)
-
 
 
 def ray_lighting(scene, values, origins, dirs):

@@ -122,15 +122,6 @@ def preintegration_uniforms(table):
     return {"u_pi_lo": table.lo, "u_pi_scale": table.scale, "u_pi_size": table.size}
 
 
-GRADIENT_TERMS = ("boundary", "silhouette", "tone")   # illustration terms that read the gradient
-
-
-def needs_gradient(scene):
-    """Whether a scene's samples read the gradient (lighting, isosurface shading, or an
-    illustration term that does)."""
-    return scene.shaded or any(name in scene.illustration for name in GRADIENT_TERMS)
-
-
 def shading_defines(scene, gradients):
     """The defines of shaders/common/shading.glsl (and the optical model of
     classification.glsl) a scene needs: none for plain emission-absorption samples.
@@ -147,7 +138,7 @@ def shading_defines(scene, gradients):
         defines["SHADING"] = 1
     for name in scene.illustration:
         defines[name.upper()] = 1
-    if needs_gradient(scene) and gradients == "texture":
+    if scene.reads_gradient and gradients == "texture":
         defines["GRADIENT_TEXTURE"] = 1
     if scene.shaded and not scene.headlight_only:
         defines["LIGHTS"] = 1
@@ -195,27 +186,24 @@ def illustration_uniforms(renderer, scene):
 def add_optional_inputs(renderer, plan, textures, uniforms):
     """Add what a plan's optional features read: the pre-integration table, the
     masked-cell texture and the lighting."""
-    from ..reference.shading import gradient_epsilon
     scene = plan.scene
     if getattr(plan, "preint", None) is not None:
         textures["t_preint"] = renderer.preintegration_texture(plan.preint)
         uniforms.update(preintegration_uniforms(plan.preint))
     if scene.volume.has_nonfinite:
         textures["t_cell_valid"] = renderer.cell_valid_texture(scene.volume)
-    if (scene.shaded or scene.illustration) and not scene.is_mesh:
-        uniforms["u_gradient_epsilon"] = gradient_epsilon(scene.volume)
-        uniforms.update(illustration_uniforms(renderer, scene))
+    if scene.shaded or scene.illustration:
+        uniforms.update(sample_term_uniforms(renderer, scene, plan.defines))
         if plan.defines.get("GRADIENT_TEXTURE"):
             textures["t_gradient"] = gradient_texture(renderer, scene.volume)
-    if scene.shaded:
-        uniforms.update(light_uniforms(scene, plan.defines))
 
 
-def light_uniforms(scene, defines):
-    """Uniforms of the lights in shaders/common/shading.glsl (and the gradient threshold of
-    a mesh, whose cells carry their own gradients)."""
+def sample_term_uniforms(renderer, scene, defines):
+    """Uniforms of shaders/common/shading.glsl for a lit or illustrated scene: the
+    gradient threshold, the lights and the illustration terms."""
     from ..reference.shading import gradient_epsilon
-    out = {"u_phong": scene.phong, "u_gradient_epsilon": gradient_epsilon(scene.volume)}
+    out = {"u_phong": scene.phong, "u_gradient_epsilon": gradient_epsilon(scene.volume),
+           **illustration_uniforms(renderer, scene)}
     if defines.get("LIGHTS"):
         lights = np.zeros((MAX_LIGHTS, 4), np.float32)
         for row, light in zip(lights, scene.lights):

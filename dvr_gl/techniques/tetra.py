@@ -48,7 +48,7 @@ from ..cache import TableCache
 from ..mesh import LOCAL_FACES, Order, centroid_order, mpvo_order, topology, visible_cells
 from ..reference.linear_segment import SegmentKnots
 from ..scene import Scene
-from .common import (illustration_uniforms, light_uniforms, cleared_target, SizedTarget, bind, camera_uniforms, check_scene, check_target, data_projection,
+from .common import (sample_term_uniforms, cleared_target, SizedTarget, bind, camera_uniforms, check_scene, check_target, data_projection,
                      grow_pixels, knot_uniforms)
 
 MODES = ("composite", "mip", "minip", "average")
@@ -269,8 +269,7 @@ def draw(renderer, plan):
                 "u_target_size": scene.target_size,
                 "u_centre": data.centre}
     if scene.shading or scene.illustration:
-        uniforms.update(light_uniforms(scene, plan.defines))
-        uniforms.update(illustration_uniforms(renderer, scene))
+        uniforms.update(sample_term_uniforms(renderer, scene, plan.defines))
     bind(prog, textures, uniforms)
     knot_uniforms(prog, plan.knots, plan.defines["KNOT_CAPACITY"])
     prog["u_view_proj"].write(view_proj)

@@ -64,14 +64,15 @@ vec4 classifiedSegment(float s, float length_over_unit) {
 #ifndef SAMPLE_TERMS
 #define SAMPLE_TERMS 0   // lighting or illustration terms: shaders/common/shading.glsl
 #endif
-#if SAMPLE_TERMS
+#if SAMPLE_TERMS   // defined in shaders/common/shading.glsl
 vec3 sampleTerms(vec3 color, vec3 p_world, vec3 ray_dir, out float opacity_scale);
+vec4 termsSegment(vec4 segment, vec3 p_world, vec3 ray_dir);
 #endif
 
-// The same for a sample taken at p on a ray along ray_dir: its colour lit (and its
-// extinction scaled) there, when the scene asks, before it is associated.
-vec4 sampleSegment(float s, float length_over_unit, vec3 p_world, vec3 ray_dir) {
-    vec4 rgba = applyTF(s);
+// The segment of a sample at p on a ray along ray_dir whose classification rgba (at value
+// s) is known: its colour lit (and its extinction scaled) there, when the scene asks,
+// before it is associated.
+vec4 sampleSegmentOf(vec4 rgba, float s, float length_over_unit, vec3 p_world, vec3 ray_dir) {
     if (rgba.a <= 0.0) return vec4(0.0);
 #if SAMPLE_TERMS
     float opacity_scale;
@@ -79,6 +80,20 @@ vec4 sampleSegment(float s, float length_over_unit, vec3 p_world, vec3 ray_dir) 
     length_over_unit *= opacity_scale;
 #endif
     return segmentOf(rgba, s, length_over_unit);
+}
+
+// The same, classifying the value s.
+vec4 sampleSegment(float s, float length_over_unit, vec3 p_world, vec3 ray_dir) {
+    return sampleSegmentOf(applyTF(s), s, length_over_unit, p_world, ray_dir);
+}
+
+// A premultiplied (pre-integrated) segment with the colour terms of a sample at p; as it
+// is when the scene has none.
+vec4 litSegment(vec4 segment, vec3 p_world, vec3 ray_dir) {
+#if SAMPLE_TERMS
+    if (segment.a > 0.0) return termsSegment(segment, p_world, ray_dir);
+#endif
+    return segment;
 }
 
 #endif

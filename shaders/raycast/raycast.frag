@@ -33,9 +33,6 @@
 #ifndef PREINTEGRATE
 #define PREINTEGRATE 0
 #endif
-#ifndef SHADING
-#define SHADING 0
-#endif
 #ifndef SAMPLE_TERMS
 #define SAMPLE_TERMS 0
 #endif
@@ -147,9 +144,7 @@ void main() {
         if (!have_front) s_front = sampleVolume(origin + a * dir);
         float s_back = sampleVolume(origin + b * dir);
         vec4 segment = preintegratedSegment(s_front, s_back, len);
-  #if SAMPLE_TERMS
-        if (segment.a > 0.0) segment = termsSegment(segment, p, dir);
-  #endif
+        segment = litSegment(segment, p, dir);
         s_front = s_back;
         have_front = true;
         color += (1.0 - alpha_acc) * segment.rgb;
@@ -189,11 +184,7 @@ void main() {
   #endif
             continue;
         }
-        float scale = 1.0;
-  #if SAMPLE_TERMS
-        rgba.rgb = sampleTerms(rgba.rgb, p, dir, scale);
-  #endif
-        vec4 piece = segmentOf(rgba, s, len * u_inv_unit * scale);
+        vec4 piece = sampleSegmentOf(rgba, s, len * u_inv_unit, p, dir);
         color += (1.0 - alpha_acc) * piece.rgb;
         alpha_acc += (1.0 - alpha_acc) * piece.a;
   #if EARLY_RAY_TERMINATION

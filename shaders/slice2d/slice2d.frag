@@ -84,14 +84,6 @@ float sampleBetween(vec3 p) {
 #include "common/shading.glsl"
 #endif
 
-// A pre-integrated segment with the colour terms at p (unchanged without them).
-vec4 lit(vec4 segment, vec3 p, vec3 dir) {
-#if SAMPLE_TERMS
-    if (segment.a > 0.0) return termsSegment(segment, p, dir);
-#endif
-    return segment;
-}
-
 #if MASK_NONFINITE
 bool validAt(int j, float t, vec3 origin, vec3 dir) {
     vec3 p = origin + t * dir;
@@ -135,10 +127,10 @@ void main() {
     float s_back = far_inside ? sampleSlice(j + ahead, t_far, origin, dir)
                               : sampleBetween(origin + range.y * dir);
     float t_back = far_inside ? t_far : range.y;
-    vec4 back = lit(preintegratedSegment(s, s_back, max(t_back - t, 0.0)), origin + (0.5 * (t + t_back)) * dir, dir);
+    vec4 back = litSegment(preintegratedSegment(s, s_back, max(t_back - t, 0.0)), origin + (0.5 * (t + t_back)) * dir, dir);
     if (!near_inside) {
         vec4 front = preintegratedSegment(sampleBetween(origin + range.x * dir), s, max(t - range.x, 0.0));
-        back = over(lit(front, origin + (0.5 * (range.x + t)) * dir, dir), back);
+        back = over(litSegment(front, origin + (0.5 * (range.x + t)) * dir, dir), back);
     }
     f_color = back;
 #endif
@@ -157,7 +149,7 @@ vec4 segmentColor(vec3 origin, vec3 dir, float a, float b) {
 #if MASK_NONFINITE
     if (!insideValidCell(origin + (0.5 * (a + b)) * dir)) return vec4(0.0);
 #endif
-    return lit(preintegratedSegment(sampleBetween(origin + a * dir), sampleBetween(origin + b * dir), b - a),
+    return litSegment(preintegratedSegment(sampleBetween(origin + a * dir), sampleBetween(origin + b * dir), b - a),
                origin + (0.5 * (a + b)) * dir, dir);
 #endif
 }

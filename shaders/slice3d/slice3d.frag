@@ -71,9 +71,7 @@ vec4 segmentColor(vec3 origin, vec3 dir, float a, float b) {
     if (!insideValidCell(0.5 * (pa + pb))) return vec4(0.0);
 #endif
     vec4 segment = preintegratedSegment(sampleVolume(pa), sampleVolume(pb), b - a);
-#if SAMPLE_TERMS
-    if (segment.a > 0.0) segment = termsSegment(segment, 0.5 * (pa + pb), dir);
-#endif
+    segment = litSegment(segment, 0.5 * (pa + pb), dir);
     return segment;
 }
 #endif
