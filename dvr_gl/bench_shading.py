@@ -197,6 +197,36 @@ def format_convergence(c):
     return "\n".join(lines)
 
 
+def figure_png(rows, info) -> bytes:
+    """Each renderer's frame time against its RMSE, log-log, one panel per data set: a
+    line per configuration through its steps, a colour each (ray caster circles, 3D
+    slicing squares, VTK triangles), the legend below the panels."""
+    import matplotlib
+    matplotlib.use("Agg", force=False)
+    from matplotlib import colormaps
+    from matplotlib.figure import Figure
+    from .bench import error_axes, figure_bytes
+
+    names = list(dict.fromkeys(r["dataset"] for r in rows))
+    labels = list(dict.fromkeys(r["renderer"] for r in rows))
+    colours = colormaps["tab20"](np.linspace(0, 1, 20))
+    fig = Figure(figsize=(5.5 * len(names), 6.5), constrained_layout=True)
+    axes = fig.subplots(1, len(names), squeeze=False)[0]
+    for ax, name in zip(axes, names):
+        for k, label in enumerate(labels):
+            pts = sorted(((r["ms_median"], r["rmse"], r["step_voxels"]) for r in rows
+                          if r["dataset"] == name and r["renderer"] == label), key=lambda p: -p[2])
+            marker = "^" if label.startswith("VTK") else "s" if label.startswith("slice3d") else "o"
+            ax.plot([p[0] for p in pts], [p[1] for p in pts], marker=marker, color=colours[k % 20], label=label)
+        error_axes(ax, "median time per frame (ms)", "RMSE against exact (premultiplied RGBA)")
+        ax.get_legend().remove()
+        ax.set_title(f"{name}, {info.get('size')}x{info.get('size')}, steps " +
+                     ", ".join(f"{s:g}" for s in info.get("steps_voxels", [])) + " voxel")
+    handles, texts = axes[0].get_legend_handles_labels()
+    fig.legend(handles, texts, loc="outside lower center", ncol=4, fontsize=8)
+    return figure_bytes(fig)
+
+
 def run_shading_bench(args) -> int:
     rows, info = run_shading(args)
     vtk = info.get("vtk", {}).get("renderer", "not run")
@@ -206,6 +236,6 @@ def run_shading_bench(args) -> int:
     print(format_shading_table(rows))
     print(format_convergence(info["convergence"]))
     if args.out:
-        paths = write_results(rows, info, args.out, fields=CSV_FIELDS)
+        paths = write_results(rows, info, args.out, fields=CSV_FIELDS, figure=figure_png)
         print("wrote " + ", ".join(str(p) for p in paths))
     return 0
