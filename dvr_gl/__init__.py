@@ -1,11 +1,11 @@
 """dvr_gl: direct volume rendering with OpenGL, headless on llvmpipe or on a GPU,
 checked against NumPy references and an exact float64 integrator."""
 
-from .scene import Camera, Light, Scene, TetMesh, TransferFunction, Volume, default_camera
+from .scene import Camera, Light, Scene, TetMesh, TransferFunction, TransferFunction2D, Volume, default_camera
 
 __version__ = "0.1.0"
 
-__all__ = ["Camera", "Light", "Renderer", "Scene", "TetMesh", "TransferFunction", "Volume", "default_camera",
+__all__ = ["Camera", "Light", "Renderer", "Scene", "TetMesh", "TransferFunction", "TransferFunction2D", "Volume", "default_camera",
            "metrics", "reference", "render", "__version__"]
 
 

@@ -211,6 +211,10 @@ def _reason(exc):
 
 
 def _describe_tf(name, tf):
+    if hasattr(tf, "table"):    # a TransferFunction2D
+        (lo, hi), (g0, g1) = tf.value_range, tf.gradient_range
+        return (f"{name} (2D: values {lo:g}..{hi:g}, gradient magnitudes {g0:g}..{g1:g}, "
+                f"unit distance {tf.unit_distance:g})")
     lo, hi = float(tf.knots[0]), float(tf.knots[-1])
     return f"{name} ({lo:g}..{hi:g}, unit distance {tf.unit_distance:g})"
 
@@ -218,7 +222,7 @@ def _describe_tf(name, tf):
 def cmd_render(args, out=None):
     out = out or sys.stdout
     from .inputs import FIRST_AZIMUTH, FIRST_ELEVATION, first_camera, shading_for
-    from .scene import Scene
+    from .scene import Scene, TransferFunction2D
     from .techniques.common import LIGHTING_TECHNIQUES, SHADING_TECHNIQUES
 
     check_png(args.out)
@@ -249,8 +253,6 @@ def cmd_render(args, out=None):
         raise UsageError("--light", "is only used with --shading (or --mode isosurface)")
     if args.light and len(args.light) > 4:
         raise UsageError("--light", f"at most 4 lights, got {len(args.light)}")
-    if args.gradients is not None and not (args.shading or mode == "isosurface" or args.illustration):
-        raise UsageError("--gradients", "is only used with --shading, --illustration or --mode isosurface")
     if args.dtype is not None:
         try:
             dvr_io._parse_dtype(args.dtype)
@@ -260,6 +262,9 @@ def cmd_render(args, out=None):
     t0 = time.perf_counter()
     volume, default_preset = load_input_args(args)
     tf_name, tf = resolve_tf_option(args.tf, volume, default_preset)
+    if args.gradients is not None and not (args.shading or mode == "isosurface" or args.illustration
+                                           or isinstance(tf, TransferFunction2D)):
+        raise UsageError("--gradients", "is only used with --shading, --illustration, a 2D --tf or --mode isosurface")
     camera = first_camera(volume, azimuth=args.azimuth, elevation=args.elevation, zoom=args.zoom,
                           fov=args.fov, ortho=args.ortho)
     width, height = args.size

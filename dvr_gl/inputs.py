@@ -115,12 +115,25 @@ def load_input(source, *, scalars=None, shape=None, dtype=None, spacing=None, or
                               mask_nonfinite=mask_nonfinite), "auto"
 
 
+def _is_tf2d_file(path):
+    """Whether a JSON file holds a 2D transfer function (widgets or a table)."""
+    import json
+    try:
+        with open(path) as f:
+            spec = json.load(f)
+    except (OSError, ValueError):
+        return False           # the 1D reader reports what is wrong with it
+    return isinstance(spec, dict) and ("widgets" in spec or "table" in spec)
+
+
 def resolve_tf(spec, data, default="auto"):
-    """(name, TransferFunction) for ``spec``: None (the ``default`` preset), a preset
-    name, a JSON file (``dvr_gl.transfer.load_tf_json``) or a TransferFunction."""
-    from .scene import TransferFunction
+    """(name, transfer function) for ``spec``: None (the ``default`` preset), a preset
+    name, a JSON file (``dvr_gl.transfer.load_tf_json``; with "widgets" or "table", a 2D
+    one, ``dvr_gl.transfer2d.load_tf2d_json``, whose ranges default to the data's values
+    and gradient magnitudes) or a TransferFunction (1D or 2D)."""
+    from .scene import TransferFunction, TransferFunction2D
     from .transfer import load_tf_json
-    if isinstance(spec, TransferFunction):
+    if isinstance(spec, (TransferFunction, TransferFunction2D)):
         return "given", spec
     if spec is None:
         return default, PRESETS[default](data)
@@ -134,6 +147,10 @@ def resolve_tf(spec, data, default="auto"):
         raise InputError("tf", str(e)) from None
     if os.path.isfile(spec):
         try:
+            if _is_tf2d_file(spec):
+                from .reference.shading import gradient_max
+                from .transfer2d import load_tf2d_json
+                return spec, load_tf2d_json(spec, data.data_range, (0.0, gradient_max(data)))
             return spec, load_tf_json(spec)
         except (ValueError, TypeError) as e:
             raise InputError("tf", str(e)) from None

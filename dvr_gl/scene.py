@@ -406,6 +406,106 @@ class TransferFunction:
                 f"{len(self.opacity_points)} opacity points, unit_distance={self.unit_distance})")
 
 
+class TransferFunction2D:
+    """Colour and opacity over (data value, gradient magnitude): a 2D transfer function
+    (Kniss et al. 2001), given as a table.
+
+    ``table`` is (n_gradient, n_value, 4) RGBA in [0, 1]: row i holds gradient magnitude
+    ``gradient_range[0] + i * dg``, column j value ``value_range[0] + j * dv``, spaced
+    evenly over the two ranges. The function is the table's bilinear interpolant, clamped
+    to its edges outside the ranges; opacity, as in ``TransferFunction``, is that of a slab
+    ``unit_distance`` thick. The gradient magnitude is the contract's |grad f| (data units
+    per world unit). ``dvr_gl.transfer2d`` builds tables from widgets (rectangles and
+    triangles) and from Levoy's (1988) iso-contour and region-boundary opacities.
+
+    A scene given one classifies every composite sample with it; ``envelope`` is the 1D
+    function of the largest opacity over the gradient range at each value, which tells
+    where nothing can be visible (empty-space skipping, the exact integrator's busy test).
+    """
+
+    def __init__(self, table, value_range, gradient_range, unit_distance=1.0):
+        try:
+            arr = np.array(table, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise TypeError(f"table must be an array of numbers, got {type(table).__name__}") from None
+        if arr.ndim != 3 or arr.shape[2] != 4 or arr.shape[0] < 2 or arr.shape[1] < 2:
+            raise ValueError(f"table must have shape (n_gradient >= 2, n_value >= 2, 4) RGBA, got {arr.shape}")
+        if not np.all(np.isfinite(arr)) or np.any(arr < 0) or np.any(arr > 1):
+            bad = arr[~(np.isfinite(arr) & (arr >= 0) & (arr <= 1))][0].item()
+            raise ValueError(f"table entries must lie in [0, 1], got {bad!r}")
+        ranges = []
+        for name, value in (("value_range", value_range), ("gradient_range", gradient_range)):
+            try:
+                lo, hi = (float(v) for v in value)
+            except (TypeError, ValueError):
+                raise TypeError(f"{name} must be two numbers (low, high), got {value!r}") from None
+            if not (math.isfinite(lo) and math.isfinite(hi) and hi > lo):
+                raise ValueError(f"{name} must be two finite numbers with low < high, got {value!r}")
+            ranges.append((lo, hi))
+        if ranges[1][0] < 0:
+            raise ValueError(f"gradient_range must start at 0 or above (a magnitude), got {gradient_range!r}")
+        arr.setflags(write=False)
+        self.table = arr
+        self.value_range, self.gradient_range = ranges
+        self.unit_distance = _finite_number("unit_distance", unit_distance, positive=True)
+        self.envelope = self._envelope()
+
+    @property
+    def values(self):
+        """The table's column positions (data values)."""
+        return np.linspace(*self.value_range, self.table.shape[1])
+
+    @property
+    def gradients(self):
+        """The table's row positions (gradient magnitudes)."""
+        return np.linspace(*self.gradient_range, self.table.shape[0])
+
+    def _envelope(self):
+        alpha = self.table[:, :, 3]
+        top = np.argmax(alpha, axis=0)
+        cols = np.arange(alpha.shape[1])
+        peak = np.minimum(alpha[top, cols], np.nextafter(1.0, 0.0))    # never opaque: it only bounds
+        v = self.values
+        color = np.column_stack([v, self.table[top, cols, :3]])
+        return TransferFunction(color, np.column_stack([v, peak]), self.unit_distance)
+
+    def _weights(self, s, g):
+        """Bilinear cells and weights of (value, gradient magnitude) points."""
+        out = []
+        for x, (lo, hi), n in ((s, self.value_range, self.table.shape[1]), (g, self.gradient_range, self.table.shape[0])):
+            u = np.clip((np.asarray(x, np.float64) - lo) * ((n - 1) / (hi - lo)), 0.0, n - 1)
+            i0 = np.minimum(np.floor(u).astype(np.int64), n - 2)
+            out += [i0, u - i0]
+        return out
+
+    def lookup(self, s, g):
+        """(rgba, transparency 1 - alpha) at values s and gradient magnitudes g (GLSL
+        ``lookupTF2D``): the table's bilinear interpolant, float64."""
+        j, fx, i, fy = self._weights(s, g)
+        t = self.table
+        fx, fy = fx[..., None], fy[..., None]
+        rgba = ((t[i, j] * (1 - fx) + t[i, j + 1] * fx) * (1 - fy)
+                + (t[i + 1, j] * (1 - fx) + t[i + 1, j + 1] * fx) * fy)
+        return rgba, 1.0 - rgba[..., 3]
+
+    def texture_rows(self):
+        """(2 n_gradient, n_value, 4) float32 for the shader: the table, then 1 - alpha in
+        the red channel of as many rows (precise near opacity 1)."""
+        n_g, n_v, _ = self.table.shape
+        out = np.zeros((2 * n_g, n_v, 4), np.float32)
+        out[:n_g] = self.table
+        out[n_g:, :, 0] = 1.0 - self.table[:, :, 3]
+        return out
+
+    def key(self):
+        return ("2d", self.table.tobytes(), self.value_range, self.gradient_range, self.unit_distance)
+
+    def __repr__(self):
+        n_g, n_v, _ = self.table.shape
+        return (f"TransferFunction2D({n_v} values in {self.value_range}, {n_g} gradient magnitudes in "
+                f"{self.gradient_range}, unit_distance={self.unit_distance})")
+
+
 class Camera:
     """A pinhole (``fov`` vertical, degrees) or orthographic (``ortho_height``) camera.
 
@@ -540,9 +640,25 @@ class Scene:
                  optical_model="emission_absorption", illustration=None):
         if not isinstance(volume, (Volume, TetMesh)):
             raise TypeError(f"volume must be a dvr_gl.Volume or dvr_gl.TetMesh, got {type(volume).__name__}")
-        for name, value, cls in (("tf", tf, TransferFunction), ("camera", camera, Camera)):
-            if not isinstance(value, cls):
-                raise TypeError(f"{name} must be a dvr_gl.{cls.__name__}, got {type(value).__name__}")
+        if not isinstance(tf, (TransferFunction, TransferFunction2D)):
+            raise TypeError(f"tf must be a dvr_gl.TransferFunction or TransferFunction2D, got {type(tf).__name__}")
+        if not isinstance(camera, Camera):
+            raise TypeError(f"camera must be a dvr_gl.Camera, got {type(camera).__name__}")
+        tf_2d = tf if isinstance(tf, TransferFunction2D) else None
+        if tf_2d is not None:
+            if mode != "composite":
+                raise ValueError(f"a TransferFunction2D classifies composite samples (it needs each sample's "
+                                 f"gradient), got mode={mode!r}")
+            if optical_model == "sabella":
+                raise ValueError("optical_model='sabella' colours a ray from its peak value alone; "
+                                 "a TransferFunction2D needs the gradient too")
+            if isinstance(volume, TetMesh):
+                raise ValueError("a TransferFunction2D classifies samples of a grid (a Volume); a TetMesh's "
+                                 "cells have one gradient each: give a 1D TransferFunction")
+            if optical_model == "emission" and np.any(tf_2d.table[:, :, 3] >= 1):
+                raise ValueError("optical_model='emission' needs opacities below 1 (tau is infinite where "
+                                 "alpha = 1), got alpha = 1 in the TransferFunction2D's table")
+            tf = tf_2d.envelope
         for name, value in (("width", width), ("height", height)):
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
                 raise TypeError(f"{name} must be an integer, got {value!r}")
@@ -596,7 +712,8 @@ class Scene:
         if not 1 <= len(lights) <= MAX_LIGHTS or not all(isinstance(l, Light) for l in lights):
             raise ValueError(f"lights must be 1 to {MAX_LIGHTS} dvr_gl.Light objects, got {lights!r}")
         self.volume = volume
-        self.tf = tf
+        self.tf = tf              # a TransferFunction2D's envelope when given one
+        self.tf_2d = tf_2d        # the TransferFunction2D, or None
         self.camera = camera
         self.lights = lights
         self.optical_model = optical_model
@@ -635,8 +752,10 @@ class Scene:
 
     @property
     def reads_gradient(self):
-        """Whether samples read the gradient: lit, or an illustration term that does."""
-        return self.shaded or any(name in self.illustration for name in GRADIENT_TERMS)
+        """Whether samples read the gradient: lit, classified by a 2D TF, or an
+        illustration term that does."""
+        return (self.shaded or self.tf_2d is not None
+                or any(name in self.illustration for name in GRADIENT_TERMS))
 
     @property
     def shaded(self):
@@ -645,7 +764,7 @@ class Scene:
 
     def replace(self, **changes):
         """A copy with some fields changed (validated again)."""
-        args = dict(volume=self.volume, tf=self.tf, camera=self.camera, width=self.width,
+        args = dict(volume=self.volume, tf=self.tf if self.tf_2d is None else self.tf_2d, camera=self.camera, width=self.width,
                     height=self.height, mode=self.mode, iso_value=self.iso_value,
                     shading=self.shading, phong=self.phong, lights=self.lights,
                     optical_model=self.optical_model, illustration=dict(self.illustration))
@@ -665,6 +784,8 @@ class Scene:
             h.update(self.optical_model.encode())
         if self.illustration:
             h.update(repr(sorted(self.illustration.items())).encode())
+        if self.tf_2d is not None:
+            h.update(repr(self.tf_2d.key()).encode())
         return h.hexdigest()
 
     def __repr__(self):

@@ -116,7 +116,7 @@ def test_camera_rays_through_pixel_centres():
 
 @pytest.mark.parametrize("kwargs,exc,message", [
     (dict(volume=DATA), TypeError, "volume must be a dvr_gl.Volume or dvr_gl.TetMesh, got ndarray"),
-    (dict(tf={"color": []}), TypeError, "tf must be a dvr_gl.TransferFunction, got dict"),
+    (dict(tf={"color": []}), TypeError, "tf must be a dvr_gl.TransferFunction or TransferFunction2D, got dict"),
     (dict(camera=None), TypeError, "camera must be a dvr_gl.Camera, got NoneType"),
     (dict(width=0), ValueError, "width must be between 1 and 65536 pixels, got 0"),
     (dict(height=100000), ValueError, "height must be between 1 and 65536 pixels, got 100000"),

@@ -160,14 +160,14 @@ def sabella_color(peak_color, intensity, depth):
 
 def classified_segment(classify, transparency, s, length_over_unit, model="emission_absorption", lit=None):
     """Premultiplied RGBA (..., 4) of segments with field value ``s`` (GLSL
-    ``classifiedSegment``; ``sampleSegment`` with ``lit``, a function of the straight
-    colours giving (their colours with the sample's terms, the extinction scale))."""
-    rgba = classify(s)
+    ``classifiedSegment``; ``sampleSegment`` with ``lit``, a function of (s, rgba,
+    transparency) giving the samples' (rgba with their terms, transparency, extinction
+    scale): ``shading.RayLighting.samples``)."""
+    rgba, clear = classify(s), transparency(s)
     if lit is not None:
-        rgba = np.array(rgba, np.float64, copy=True)
-        rgba[..., :3], scale = lit(rgba[..., :3])
+        rgba, clear, scale = lit(s, rgba, clear)
         length_over_unit = length_over_unit * scale
-    return segment_of(rgba, transparency(s), length_over_unit, model)
+    return segment_of(rgba, clear, length_over_unit, model)
 
 
 def composite_front_to_back(color_acc, alpha_acc, rgb, alpha):
@@ -222,7 +222,7 @@ def segment_colors(plan, sample, valid, a, b, lut_exact=False, light=None):
         if light is not None:
             out = light.segments(out, tm)
     else:
-        lit = None if light is None else (lambda rgb: light.samples(rgb, tm))
+        lit = None if light is None else (lambda *sample: light.samples(*sample, tm))
         out = classified_segment(*classifier(plan, lut_exact), sample(tm), (b - a) / plan.scene.tf.unit_distance,
                                  plan.scene.optical_model, lit)
     if valid is not None:

@@ -210,6 +210,10 @@ class _Classified:
     # what each piece carries for them: its geometry (grids, terms per node) or its own
     # constant colour factor and added colour (a mesh's cell, lit with its gradient)
     piece_keys = ()
+    # a 2D transfer function (grids): ``classify_2d(points, dirs, s)`` gives (rgba,
+    # transparency, factor, offset, scale) at the nodes (``shading.SampleTerms.classify``);
+    # ``tf`` is then its envelope, which only says where nothing is visible
+    classify_2d = None
 
     def __init__(self, tf, optical_model="emission_absorption"):
         self.tf = tf
@@ -359,7 +363,7 @@ class _Classified:
         smallest opacity over the part's value range (ends and interior critical points;
         opacity is linear in s on a sub-piece) times its length. Emission only: 0, since
         nothing in front of a part absorbs."""
-        if self.emission:
+        if self.emission or self.classify_2d is not None:   # a 2D TF's envelope bounds from above
             return np.zeros(len(ta))
         c = sub["coef"][i]
         sa, sb = _peval(c, ta), _peval(c, tb)
@@ -441,7 +445,13 @@ class _Classified:
             tau = tau * geo["scale"][:, None]
         elif geo is not None:
             points = geo["base"][:, None, :] + x[..., None] * geo["hd"][:, None, :]
-            factor, offset, scale = self.lighting(points, geo["dir"][:, None, :])
+            if self.classify_2d is not None:    # the table at each node's gradient magnitude
+                rgba, _, factor, offset, scale = self.classify_2d(points, geo["dir"][:, None, :], s)
+                alpha = np.clip(rgba[..., 3], 0.0, _ALPHA_MAX)
+                tau = -np.log1p(-alpha) * self.inv_u
+                node_color = np.zeros(rgba.shape[:-1] + (3,)) if self.absorption else rgba[..., :3]
+            else:
+                factor, offset, scale = self.lighting(points, geo["dir"][:, None, :])
             tau = tau * scale
         hw = h * half                             # half-length of the part in t
         Tk = np.exp(-hw[:, None] * (tau @ _SK.T))   # transmittance from the part's start
@@ -459,9 +469,13 @@ class _Classified:
             gk, gg = gk * factor, gg * factor[:, _GI]
         D0k, D1k = hw * (gk @ _WK), hw * ((ds * gk) @ _WK)
         D0g, D1g = hw * (gg @ _WG), hw * ((ds[:, _GI] * gg) @ _WG)
-        c0, c1 = self.c0[m], self.c1[m]
-        Ck = c0 * D0k[:, None] + c1 * D1k[:, None] - cend * G0k[:, None]
-        Cg = c0 * D0g[:, None] + c1 * D1g[:, None] - cend * G0g[:, None]
+        if self.classify_2d is not None and geo is not None:    # colour per node, not linear in ds
+            Ck = hw[:, None] * np.einsum("pn,pnc,n->pc", gk, node_color, _WK) - cend * G0k[:, None]
+            Cg = hw[:, None] * np.einsum("pn,pnc,n->pc", gg, node_color[:, _GI], _WG) - cend * G0g[:, None]
+        else:
+            c0, c1 = self.c0[m], self.c1[m]
+            Ck = c0 * D0k[:, None] + c1 * D1k[:, None] - cend * G0k[:, None]
+            Cg = c0 * D0g[:, None] + c1 * D1g[:, None] - cend * G0g[:, None]
         if offset is not None:
             Ck += hw[:, None] * np.einsum("pn,pnc,n->pc", tau * Tk, offset, _WK)
             Cg += hw[:, None] * np.einsum("pn,pnc,n->pc", tg * Tg, offset[:, _GI], _WG)
@@ -492,6 +506,8 @@ class _Exact(_Classified):
             self.lighting = terms.at
             self.piece_keys = ("base", "hd", "dir")
             self.scale_floor = terms.scale_floor
+            if scene.tf_2d is not None:
+                self.classify_2d = terms.classify
 
     # -- traversal ------------------------------------------------------------
     def pieces(self, o, d, tcur, t1, M):

@@ -127,7 +127,7 @@ def render_plan(plan, lut_exact=False):
             if terms is not None:
                 light = RayLighting(terms, o[rows], d[rows])
             piece = classified_segment(classify, transparency, s, length * inv_unit, scene.optical_model,
-                                       None if light is None else (lambda rgb: light.samples(rgb, tm)))
+                                       None if light is None else (lambda *sample: light.samples(*sample, tm)))
             transmittance = 1 - alpha_acc[rows]
             color[rows] += transmittance[:, None] * piece[:, :3]
             alpha_acc[rows] += transmittance * piece[:, 3]

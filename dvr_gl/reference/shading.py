@@ -150,15 +150,26 @@ class SampleTerms:
         """(factor, offset, scale) at ``points`` seen along ``dirs``; ``grad`` gives the
         gradients instead of reading them (a mesh's cells)."""
         points = np.asarray(points, np.float64)
-        shape = points.shape[:-1]
-        dirs = np.broadcast_to(dirs, points.shape)
-        factor = np.ones(shape)
-        offset = np.zeros(shape + (3,))
-        scale = np.ones(shape)
         if grad is not None:
             g = np.broadcast_to(grad, points.shape)
         else:
             g = gradient(self.volume, self.values, points) if self.needs_gradient else None
+        return self._terms(points, np.broadcast_to(dirs, points.shape), g)
+
+    def classify(self, points, dirs, s):
+        """A scene with a 2D transfer function: (rgba, transparency) of the values ``s`` at
+        ``points`` from the table at their gradient magnitude (GLSL ``lookupTF2D``), and
+        (factor, offset, scale) there, the gradient read once."""
+        points = np.asarray(points, np.float64)
+        g = gradient(self.volume, self.values, points)
+        rgba, transparency = self.scene.tf_2d.lookup(s, np.linalg.norm(g, axis=-1))
+        return (rgba, transparency) + self._terms(points, np.broadcast_to(dirs, points.shape), g)
+
+    def _terms(self, points, dirs, g):
+        shape = points.shape[:-1]
+        factor = np.ones(shape)
+        offset = np.zeros(shape + (3,))
+        scale = np.ones(shape)
         if g is not None:
             length = np.linalg.norm(g, axis=-1)
             ok = length > self.epsilon
@@ -190,15 +201,16 @@ class SampleTerms:
 
 
 def sample_terms(scene, values):
-    """The scene's ``SampleTerms``, or None when its composite samples are plain."""
-    if scene.mode != "composite" or not (scene.shading or scene.illustration):
+    """The scene's ``SampleTerms``, or None when its composite samples are plain (lit by
+    nothing, no illustration term, a 1D transfer function)."""
+    if scene.mode != "composite" or not (scene.shading or scene.illustration or scene.tf_2d is not None):
         return None
     return SampleTerms(scene, values)
 
 
 class RayLighting:
     """A scene's ``SampleTerms`` along some rays ``origins + t * dirs`` (box-relative, one
-    per row): ``samples(rgb, t)`` for straight colours of samples at ray distances ``t``
+    per row): ``samples(s, rgba, transparency, t)`` for classified samples at ray distances ``t``
     (GLSL ``sampleTerms``), ``segments(seg, t)`` for premultiplied (pre-integrated)
     segments there (GLSL ``litSegment``)."""
 
@@ -209,11 +221,23 @@ class RayLighting:
     def at(self, t):
         return self.terms.at(self.origins + np.asarray(t)[:, None] * self.dirs + self.lo, self.dirs)
 
-    def samples(self, rgb, t):
-        """(the straight colours ``rgb`` of samples at ``t`` with the terms applied, their
-        extinction scale)."""
-        factor, offset, scale = self.at(t)
-        return rgb * factor[:, None] + offset, scale
+    def samples(self, s, rgba, transparency, t):
+        """Samples of values ``s`` at ``t`` classified as ``rgba`` (straight colour, and
+        ``transparency``) by the 1D TF: (their rgba with the terms applied, their
+        transparency, their extinction scale). With a 2D TF, ``rgba`` only gates (it is the
+        envelope): the table at the sample's gradient magnitude classifies where it is
+        non-zero (GLSL ``sampleSegmentOf``)."""
+        if self.terms.scene.tf_2d is not None:
+            p = self.origins + np.asarray(t)[:, None] * self.dirs + self.lo
+            rgba2, transparency2, factor, offset, scale = self.terms.classify(p, self.dirs, s)
+            visible = rgba[..., 3] > 0
+            rgba = np.where(visible[:, None], rgba2, 0.0)
+            transparency = np.where(visible, transparency2, 1.0)
+        else:
+            factor, offset, scale = self.at(t)
+            rgba = np.array(rgba, np.float64, copy=True)
+        rgba[:, :3] = rgba[:, :3] * factor[:, None] + offset
+        return rgba, transparency, scale
 
     def segments(self, seg, t):
         factor, offset, _ = self.at(t)

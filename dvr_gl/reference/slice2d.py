@@ -70,7 +70,7 @@ def render_plan(plan, lut_exact=False):
             s = np.where(partial, sample_between(0.5 * (a + b)), s)
             # lit where the sample was taken: the slice point, or the partial slab's midpoint
             t_sample = np.where(partial, 0.5 * (a + b), tj)
-            lit = None if lighting is None else (lambda rgb: lighting.samples(rgb, t_sample))
+            lit = None if lighting is None else (lambda *sample: lighting.samples(*sample, t_sample))
             src = classified_segment(classify, transparency, s, (b - a) / scene.tf.unit_distance,
                                      scene.optical_model, lit)
         else:

@@ -31,6 +31,9 @@ def check_scene(scene, technique, modes=None, data="volume"):
         if technique != "tetra":
             raise ValueError(f"{technique} has no illustration terms yet: they are rendered by "
                              f"{', '.join(SHADING_TECHNIQUES)} (tetra: boundary, silhouette, tone)")
+    if scene.tf_2d is not None and technique not in SHADING_TECHNIQUES:
+        raise ValueError(f"{technique} classifies by value alone; a TransferFunction2D (value and gradient "
+                         f"magnitude) is rendered by {', '.join(SHADING_TECHNIQUES)}")
     if scene.shading and technique not in LIGHTING_TECHNIQUES:
         raise ValueError(f"{technique} does not light samples yet: shading=True is rendered by "
                          f"{', '.join(LIGHTING_TECHNIQUES)}")
@@ -108,6 +111,9 @@ def preintegration_table(scene, step, tables):
     if scene.optical_model != "emission_absorption":
         raise ValueError(f"preintegrate tables emission-absorption segments; optical_model "
                          f"{scene.optical_model!r} is sampled at segment midpoints (preintegrate=False)")
+    if scene.tf_2d is not None:
+        raise ValueError("preintegrate tables segments by the values at their ends; a TransferFunction2D "
+                         "also needs the gradient along them (preintegrate=False)")
     scaled = [name for name in ("boundary", "silhouette") if name in scene.illustration]
     if scaled:
         raise ValueError(f"preintegrate tables the TF's own extinction; {' and '.join(scaled)} enhancement "
@@ -132,8 +138,10 @@ def shading_defines(scene, gradients):
         raise ValueError(f"gradients must be one of {', '.join(GRADIENTS)}, got {gradients!r}")
     defines = {}
     composite = scene.mode == "composite"
-    if composite and (scene.shading or scene.illustration):
+    if composite and (scene.shading or scene.illustration or scene.tf_2d is not None):
         defines["SAMPLE_TERMS"] = 1
+    if scene.tf_2d is not None:
+        defines["TF_2D"] = 1
     if scene.shading and composite:
         defines["SHADING"] = 1
     for name in scene.illustration:
@@ -192,10 +200,32 @@ def add_optional_inputs(renderer, plan, textures, uniforms):
         uniforms.update(preintegration_uniforms(plan.preint))
     if scene.volume.has_nonfinite:
         textures["t_cell_valid"] = renderer.cell_valid_texture(scene.volume)
-    if scene.shaded or scene.illustration:
+    if scene.shaded or scene.illustration or scene.tf_2d is not None:
         uniforms.update(sample_term_uniforms(renderer, scene, plan.defines))
         if plan.defines.get("GRADIENT_TEXTURE"):
             textures["t_gradient"] = gradient_texture(renderer, scene.volume)
+    if scene.tf_2d is not None:
+        textures["t_tf2d"] = tf2d_texture(renderer, scene.tf_2d)
+        uniforms.update(tf2d_uniforms(scene.tf_2d))
+
+
+def tf2d_texture(renderer, tf_2d):
+    """A TransferFunction2D's table and transparency rows (``texture_rows``) as an
+    RGBA32F texture read with texelFetch, kept with the function."""
+    def make():
+        rows = tf_2d.texture_rows()
+        tex = renderer.ctx.texture((rows.shape[1], rows.shape[0]), 4, rows.tobytes(), dtype="f4")
+        tex.filter = (renderer.ctx.NEAREST, renderer.ctx.NEAREST)
+        return tex
+    return renderer.resource("tf2d", tf_2d, make=make)
+
+
+def tf2d_uniforms(tf_2d):
+    """Uniforms of ``lookupTF2D`` (shaders/common/classification.glsl)."""
+    n_g, n_v, _ = tf_2d.table.shape
+    (v0, v1), (g0, g1) = tf_2d.value_range, tf_2d.gradient_range
+    return {"u_tf2d_lo": (v0, g0), "u_tf2d_scale": ((n_v - 1) / (v1 - v0), (n_g - 1) / (g1 - g0)),
+            "u_tf2d_size": (n_v, n_g)}
 
 
 def sample_term_uniforms(renderer, scene, defines):

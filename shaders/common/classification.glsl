@@ -39,9 +39,9 @@ float transparencyTF(float s) {
 // premultiplied RGBA under the scene's optical model (NumPy twin:
 // reference.common.segment_of): emission-absorption (c alpha, alpha) with alpha corrected
 // for the length; absorption only (0, alpha); emission only (c tau L, 0), nothing absorbed.
-vec4 segmentOf(vec4 rgba, float s, float length_over_unit) {
+// transparency is 1 - alpha, precise near 1 (read only above alpha 0.5).
+vec4 segmentWith(vec4 rgba, float transparency, float length_over_unit) {
     if (rgba.a <= 0.0) return vec4(0.0);
-    float transparency = rgba.a > 0.5 ? transparencyTF(s) : 1.0 - rgba.a;
 #if OPTICAL_MODEL == 2
     float log_transparency = rgba.a <= 0.5 ? log1pAccurate(-rgba.a) : log(transparency);
     return vec4(rgba.rgb * (-log_transparency * max(length_over_unit, 0.0)), 0.0);
@@ -53,6 +53,12 @@ vec4 segmentOf(vec4 rgba, float s, float length_over_unit) {
     return vec4(rgba.rgb * alpha, alpha);
   #endif
 #endif
+}
+
+// The same for a sample of the 1D transfer function at value s.
+vec4 segmentOf(vec4 rgba, float s, float length_over_unit) {
+    if (rgba.a <= 0.0) return vec4(0.0);
+    return segmentWith(rgba, rgba.a > 0.5 ? transparencyTF(s) : 1.0 - rgba.a, length_over_unit);
 }
 
 // Premultiplied colour and opacity of a segment length_over_unit unit distances long
@@ -67,14 +73,57 @@ vec4 classifiedSegment(float s, float length_over_unit) {
 #if SAMPLE_TERMS   // defined in shaders/common/shading.glsl
 vec3 sampleTerms(vec3 color, vec3 p_world, vec3 ray_dir, out float opacity_scale);
 vec4 termsSegment(vec4 segment, vec3 p_world, vec3 ray_dir);
+vec3 gradient(vec3 p_world);
+void termsFor(vec3 g, vec3 p_world, vec3 ray_dir, out float factor, out vec3 offset, out float opacity_scale);
+#endif
+
+#ifndef TF_2D
+#define TF_2D 0          // a 2D transfer function over (value, |gradient|); needs SAMPLE_TERMS
+#endif
+#if TF_2D
+uniform sampler2D t_tf2d;    // (n_value, 2 n_gradient) RGBA32F: rows [0, n_gradient) the table,
+                             // rows [n_gradient, 2 n_gradient) 1 - alpha in red
+uniform vec2 u_tf2d_lo;      // value and gradient magnitude of entry (0, 0)
+uniform vec2 u_tf2d_scale;   // entries per unit of each
+uniform ivec2 u_tf2d_size;   // (n_value, n_gradient)
+
+// The table's bilinear interpolant at value s and gradient magnitude g, and its
+// transparency (NumPy twin: TransferFunction2D.lookup), in full float precision.
+vec4 lookupTF2D(float s, float g, out float transparency) {
+    vec2 u = clamp((vec2(s, g) - u_tf2d_lo) * u_tf2d_scale, vec2(0.0), vec2(u_tf2d_size - 1));
+    ivec2 i = min(ivec2(floor(u)), u_tf2d_size - 2);
+    vec2 f = u - vec2(i);
+    vec4 lower = texelFetch(t_tf2d, i, 0) * (1.0 - f.x) + texelFetch(t_tf2d, i + ivec2(1, 0), 0) * f.x;
+    vec4 upper = texelFetch(t_tf2d, i + ivec2(0, 1), 0) * (1.0 - f.x) + texelFetch(t_tf2d, i + ivec2(1, 1), 0) * f.x;
+    vec4 rgba = lower * (1.0 - f.y) + upper * f.y;
+    transparency = 1.0 - rgba.a;
+    if (rgba.a > 0.5) {
+        ivec2 t = i + ivec2(0, u_tf2d_size.y);
+        float t_lower = texelFetch(t_tf2d, t, 0).r * (1.0 - f.x) + texelFetch(t_tf2d, t + ivec2(1, 0), 0).r * f.x;
+        float t_upper = texelFetch(t_tf2d, t + ivec2(0, 1), 0).r * (1.0 - f.x) + texelFetch(t_tf2d, t + ivec2(1, 1), 0).r * f.x;
+        transparency = t_lower * (1.0 - f.y) + t_upper * f.y;
+    }
+    return rgba;
+}
 #endif
 
 // The segment of a sample at p on a ray along ray_dir whose classification rgba (at value
 // s) is known: its colour lit (and its extinction scaled) there, when the scene asks,
 // before it is associated.
+// With a 2D transfer function rgba is its envelope (the largest opacity at s): zero there
+// means nothing at any gradient, so only the others read the gradient and the 2D table.
 vec4 sampleSegmentOf(vec4 rgba, float s, float length_over_unit, vec3 p_world, vec3 ray_dir) {
     if (rgba.a <= 0.0) return vec4(0.0);
-#if SAMPLE_TERMS
+#if TF_2D
+    vec3 g = gradient(p_world);
+    float transparency;
+    rgba = lookupTF2D(s, length(g), transparency);
+    float factor, opacity_scale;
+    vec3 offset;
+    termsFor(g, p_world, ray_dir, factor, offset, opacity_scale);
+    rgba.rgb = rgba.rgb * factor + offset;
+    return segmentWith(rgba, transparency, length_over_unit * opacity_scale);
+#elif SAMPLE_TERMS
     float opacity_scale;
     rgba.rgb = sampleTerms(rgba.rgb, p_world, ray_dir, opacity_scale);
     length_over_unit *= opacity_scale;
