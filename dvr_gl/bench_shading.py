@@ -8,6 +8,9 @@ Speed, per data set (the chest CT and the CT head, as in the peer suite) and ste
   lookups per lit sample) and lit from the gradient texture (one lookup);
 - ``raycast`` with each illustration term alone (boundary, silhouette, tone, depth cue)
   and lit with all four;
+- ``raycast`` and ``slice3d`` classified by a 2D transfer function (the data set's TF
+  with Levoy's gradient-magnitude opacity modulation, ``transfer2d.gradient_modulated``),
+  unlit and lit;
 - VTK's GPU ray caster unlit and with ``ShadeOn()`` (same ka, kd, ks, shininess), at the
   same step,
 
@@ -36,20 +39,26 @@ from .progress import Progress
 from .scene import Scene
 
 ALL_TERMS = ("boundary", "silhouette", "tone", "depth_cue")
-PLAIN, LIT = (False, ()), (True, ())
-CONFIGS = (  # (label, kind, technique, (lit, illustration terms), options, the row its cost divides by)
+# a variant: (lit, illustration terms, classified by the 2D TF gradient_modulated makes)
+PLAIN, LIT, TF2D, TF2D_LIT = (False, (), False), (True, (), False), (False, (), True), (True, (), True)
+CONFIGS = (  # (label, kind, technique, variant, options, the row its cost divides by)
     ("raycast", "dvr_gl", "raycast", PLAIN, {}, None),
     ("raycast lit", "dvr_gl", "raycast", LIT, {}, "raycast"),
     ("raycast lit texture", "dvr_gl", "raycast", LIT, {"gradients": "texture"}, "raycast"),
-    ("raycast +boundary", "dvr_gl", "raycast", (False, ("boundary",)), {}, "raycast"),
-    ("raycast +silhouette", "dvr_gl", "raycast", (False, ("silhouette",)), {}, "raycast"),
-    ("raycast +tone", "dvr_gl", "raycast", (False, ("tone",)), {}, "raycast"),
-    ("raycast +depth_cue", "dvr_gl", "raycast", (False, ("depth_cue",)), {}, "raycast"),
-    ("raycast lit +all four", "dvr_gl", "raycast", (True, ALL_TERMS), {}, "raycast"),
-    ("raycast lit +all four texture", "dvr_gl", "raycast", (True, ALL_TERMS), {"gradients": "texture"}, "raycast"),
+    ("raycast +boundary", "dvr_gl", "raycast", (False, ("boundary",), False), {}, "raycast"),
+    ("raycast +silhouette", "dvr_gl", "raycast", (False, ("silhouette",), False), {}, "raycast"),
+    ("raycast +tone", "dvr_gl", "raycast", (False, ("tone",), False), {}, "raycast"),
+    ("raycast +depth_cue", "dvr_gl", "raycast", (False, ("depth_cue",), False), {}, "raycast"),
+    ("raycast lit +all four", "dvr_gl", "raycast", (True, ALL_TERMS, False), {}, "raycast"),
+    ("raycast lit +all four texture", "dvr_gl", "raycast", (True, ALL_TERMS, False), {"gradients": "texture"},
+     "raycast"),
+    ("raycast 2D TF", "dvr_gl", "raycast", TF2D, {}, "raycast"),
+    ("raycast 2D TF texture", "dvr_gl", "raycast", TF2D, {"gradients": "texture"}, "raycast"),
+    ("raycast 2D TF lit texture", "dvr_gl", "raycast", TF2D_LIT, {"gradients": "texture"}, "raycast"),
     ("slice3d", "dvr_gl", "slice3d", PLAIN, {}, None),
     ("slice3d lit", "dvr_gl", "slice3d", LIT, {}, "slice3d"),
     ("slice3d lit texture", "dvr_gl", "slice3d", LIT, {"gradients": "texture"}, "slice3d"),
+    ("slice3d 2D TF texture", "dvr_gl", "slice3d", TF2D, {"gradients": "texture"}, "slice3d"),
     ("VTK GPU raycast", "vtk", None, PLAIN, {}, None),
     ("VTK GPU raycast ShadeOn", "vtk", None, LIT, {}, "VTK GPU raycast"),
 )
@@ -60,8 +69,18 @@ CSV_FIELDS = ["dataset", "step_voxels", "renderer", "lit", "terms", "width", "ms
 
 
 def variant(scene, lit_terms):
-    lit, terms = lit_terms
-    return scene.replace(shading=lit, illustration=terms)
+    lit, terms, tf2d = lit_terms
+    scene = scene.replace(shading=lit, illustration=terms)
+    return scene.replace(tf=modulated_tf(scene.volume, scene.tf)) if tf2d else scene
+
+
+@functools.lru_cache(maxsize=4)
+def modulated_tf(volume, tf):
+    """The data set's TF with Levoy's gradient-magnitude opacity modulation, as a 2D TF
+    over the volume's gradient magnitudes (made once per volume and TF)."""
+    from .reference.shading import gradient_max
+    from .transfer2d import gradient_modulated
+    return gradient_modulated(tf, (0.0, gradient_max(volume)))
 
 
 def _timed_rows(gl, peers, name, scene, step_vox, repeats, progress, exact_images):
@@ -90,7 +109,7 @@ def _timed_rows(gl, peers, name, scene, step_vox, repeats, progress, exact_image
             image = gl.render(small, technique=technique, step=step, **opts)
         err = metrics.compare(image, exact)
         rows.append({"dataset": name, "step_voxels": step_vox, "renderer": label, "lit": lit_terms[0],
-                     "terms": "+".join(lit_terms[1]), "base": base,
+                     "terms": "+".join(lit_terms[1] + (("tf2d",) if lit_terms[2] else ())), "base": base,
                      "width": scene.width, "ms_median": 1e3 * float(np.median(ts)), "ms_min": 1e3 * min(ts),
                      "error_size": small.width, "rmse": err["rmse"], "max_abs": err["max_abs"],
                      "psnr": err["psnr"], "cost": None, "time_vs_vtk": None})
@@ -155,7 +174,8 @@ def run_shading(args, err=None):
                 for lit_terms in VARIANTS:
                     small = variant(Scene(volume, tf, camera, width=args.error_size, height=args.error_size),
                                     lit_terms)
-                    what = f"{name}: exact image, {'lit' if lit_terms[0] else 'unlit'} {'+'.join(lit_terms[1])}"
+                    what = (f"{name}: exact image, {'lit' if lit_terms[0] else 'unlit'} {'+'.join(lit_terms[1])}"
+                            + (" 2D TF" if lit_terms[2] else ""))
                     progress.begin(what)
                     exact_images[lit_terms] = (small, exact_image(small))
                     progress.advance(what)

@@ -60,11 +60,18 @@ def _release(value):
 class TableCache:
     """CPU tables derived from scene objects (a TF's lookup table, a volume's brick value
     ranges, their occupancy): built on first use, reused while the objects live in the
-    cache."""
+    cache. Each kind (the part of ``kind`` before any ":") keeps its own ``capacity`` most
+    recent entries, so that scenes used in turn (a bench's configurations, a viewer's
+    toggles) never push each other's tables out."""
 
     def __init__(self, capacity=4):
-        self._lru = LRU(capacity)
+        self.capacity = capacity
+        self._lrus = {}
 
     def get(self, kind, *objects, make):
         """``make(*objects)``, built once while these objects stay in the cache."""
-        return self._lru.get(IdentityKey(kind, *objects), lambda: make(*objects))
+        group = kind.split(":", 1)[0]
+        lru = self._lrus.get(group)
+        if lru is None:
+            lru = self._lrus[group] = LRU(self.capacity)
+        return lru.get(IdentityKey(kind, *objects), lambda: make(*objects))

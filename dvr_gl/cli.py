@@ -223,7 +223,7 @@ def cmd_render(args, out=None):
     out = out or sys.stdout
     from .inputs import FIRST_AZIMUTH, FIRST_ELEVATION, first_camera, shading_for
     from .scene import Scene, TransferFunction2D
-    from .techniques.common import LIGHTING_TECHNIQUES, SHADING_TECHNIQUES
+    from .techniques.common import SHADING_TECHNIQUES
 
     check_png(args.out)
     check_technique(args.technique)
@@ -235,9 +235,6 @@ def cmd_render(args, out=None):
         raise UsageError("--iso", f"is only used with --mode isosurface, not --mode {mode}")
     if args.shading and mode not in ("composite", "isosurface"):
         raise UsageError("--shading", f"lights composite samples (isosurfaces always are), not --mode {mode}")
-    if args.shading and args.technique not in LIGHTING_TECHNIQUES:
-        raise UsageError("--shading", f"applies to --technique {', '.join(LIGHTING_TECHNIQUES)}, "
-                                      f"not {args.technique}")
     if args.optical_model not in (None, "emission_absorption"):
         if args.optical_model == "sabella" and args.technique != "raycast":
             raise UsageError("--optical-model", f"sabella applies to --technique raycast, not {args.technique}")

@@ -120,7 +120,8 @@ def add_render_options(r):
                                                   "and tets, ...) or builtin:NAME")
     r.add_argument("--tf", metavar="PRESET|FILE.json",
                    help=f"transfer function: a preset ({', '.join(PRESETS)}) or a JSON file "
-                        "{\"color\": [[s, r, g, b], ...], \"opacity\": [[s, a], ...], \"unit_distance\": u}; "
+                        "{\"color\": [[s, r, g, b], ...], \"opacity\": [[s, a], ...], \"unit_distance\": u}, "
+                        "or a 2D one over (value, gradient magnitude) {\"widgets\": [...]} or {\"table\": ...}; "
                         "default: auto (the data set's own for builtin inputs)")
     r.add_argument("--technique", default=None,
                    help="rendering technique: raycast, slice2d or slice3d for volumes, tetra for meshes, "

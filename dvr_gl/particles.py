@@ -57,12 +57,14 @@ _CELL_CHUNK = 1 << 18           # cells processed at a time
 class ParticleSet:
     """One independent set: ``points`` (N, 3) float32 relative to the data's lower corner,
     ``scalars`` (N,) float32, ``colors`` (N, 3) float32 (the exact TF's at each scalar,
-    made with the set: a set belongs to one TF), and how many candidates were drawn."""
+    made with the set: a set belongs to one TF), how many candidates were drawn, and the
+    cell of each particle (a lit mesh's particles take their cell's gradient)."""
     points: np.ndarray
     scalars: np.ndarray
     colors: np.ndarray
     candidates: int
     cells: int                   # cells that can emit (non-zero opacity in their range)
+    owners: np.ndarray = None    # (N,) the cell (grid cell or tetrahedron) each particle is in
 
     @property
     def count(self):
@@ -136,23 +138,32 @@ def generate(data, tf, radius, seed=0, repetition=0, sampler="rejection"):
     if mean.sum() > MAX_PARTICLES:
         raise ValueError(f"radius={radius!r} needs about {mean.sum():.3g} particle candidates per set "
                          f"(at most {MAX_PARTICLES:,}): use a larger radius or a smaller image")
-    points, scalars, candidates = [], [], 0
+    points, scalars, owners, candidates = [], [], [], 0
     for start in range(0, emitting.size, _CELL_CHUNK):
         owner = np.repeat(emitting[start:start + _CELL_CHUNK], rng.poisson(mean[start:start + _CELL_CHUNK]))
         candidates += owner.size
         p, s = cells.place(owner, rng)
         if sampler == "rejection":
             keep = rng.random(owner.size) * tau_max[owner] < extinction(tf, s)
-            p, s = p[keep], s[keep]
+            p, s, owner = p[keep], s[keep], owner[keep]
         elif sampler == "metropolis":
             p, s = _metropolis(cells, owner, p, s, tf, rng)
         points.append(p.astype(np.float32))
         scalars.append(s.astype(np.float32))
+        owners.append(owner)
     if not points:
-        points, scalars = [np.zeros((0, 3), np.float32)], [np.zeros(0, np.float32)]
+        points, scalars, owners = [np.zeros((0, 3), np.float32)], [np.zeros(0, np.float32)], [np.zeros(0, np.int64)]
     scalars = np.concatenate(scalars)
     colors = tf.color(scalars.astype(np.float64)).reshape(-1, 3).astype(np.float32)
-    return ParticleSet(np.concatenate(points), scalars, colors, candidates, int(emitting.size))
+    return ParticleSet(np.concatenate(points), scalars, colors, candidates, int(emitting.size),
+                       np.concatenate(owners))
+
+
+def particle_gradients(particle_set, data):
+    """(N, 3) float32: the gradient at each particle, for lighting it. A grid's is the
+    contract's gradient at the particle's centre; a mesh's, its cell's (constant)."""
+    from .reference.shading import point_gradients
+    return point_gradients(data, particle_set.points, particle_set.owners).astype(np.float32)
 
 
 def _metropolis(cells, owner, p, s, tf, rng):

@@ -237,3 +237,21 @@ def load_tf2d_json(path, value_range=None, gradient_range=None):
                 raise ValueError(f"{path}: widgets[{i}]: {e}") from None
             raise
     return from_widgets(widgets, vr, gr, spec.get("resolution", RESOLUTION), unit)
+
+
+def gradient_modulated(tf, gradient_range, floor=0.1, resolution=RESOLUTION):
+    """Levoy's gradient-magnitude opacity modulation of a 1D function as a 2D one: the
+    colour of ``tf`` and its opacity times ``floor + (1 - floor) g / g_hi`` at gradient
+    magnitude g (``gradient_range`` = (g_lo, g_hi)), so homogeneous regions fade and
+    boundaries between materials stay. ``tf`` is sampled at ``resolution[0]`` values over
+    its control points' span (its knots fall between entries unless they are evenly
+    spaced)."""
+    floor = _unit("floor", floor)
+    knots = tf.knots
+    if len(knots) < 2:
+        raise ValueError(f"tf needs control points at two values at least, got {knots.tolist()}")
+    S, G = _grid((knots[0], knots[-1]), gradient_range, resolution)
+    g_hi = _interval("gradient_range", gradient_range)[1]
+    alpha = tf.opacity(S) * (floor + (1 - floor) * G / g_hi)
+    table = np.concatenate([tf.color(S), alpha[..., None]], axis=-1)
+    return TransferFunction2D(table, (knots[0], knots[-1]), gradient_range, tf.unit_distance)

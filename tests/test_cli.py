@@ -128,7 +128,6 @@ BAD = [
     (["--shape", "9,9,9"], "--shape", "(9, 9, 9)"),
     (["--dtype", "int16"], "--dtype", "int16"),
     (["--shading", "--mode", "mip"], "--shading", "not --mode mip"),
-    (["--shading", "--technique", "particles"], "--shading", "not particles"),
     (["--no-shading", "--gradients", "texture"], "--gradients", "only used with --shading"),
     (["--illustration", "halo"], "argument --illustration", "'halo'"),
     (["--illustration", "tone", "--mode", "mip"], "--illustration", "not --mode mip"),
@@ -674,8 +673,10 @@ def test_shading_bench_quick_run(tmp_path, capsys):
     rows = {r["renderer"]: r for r in table}
     assert set(rows) == {"raycast", "raycast lit", "raycast lit texture", "raycast +boundary",
                          "raycast +silhouette", "raycast +tone", "raycast +depth_cue", "raycast lit +all four",
-                         "raycast lit +all four texture", "slice3d", "slice3d lit",
-                         "slice3d lit texture", "VTK GPU raycast", "VTK GPU raycast ShadeOn"}
+                         "raycast lit +all four texture", "raycast 2D TF", "raycast 2D TF texture",
+                         "raycast 2D TF lit texture", "slice3d", "slice3d lit", "slice3d lit texture",
+                         "slice3d 2D TF texture", "VTK GPU raycast", "VTK GPU raycast ShadeOn"}
+    assert float(rows["raycast 2D TF"]["cost"]) > 0 and float(rows["raycast 2D TF"]["rmse"]) < 1e-2
     assert float(rows["raycast +tone"]["cost"]) > 0 and float(rows["raycast +tone"]["rmse"]) < 1e-2
     assert float(rows["raycast lit"]["cost"]) > 0 and float(rows["VTK GPU raycast ShadeOn"]["cost"]) > 0
     assert float(rows["raycast lit"]["rmse"]) < 1e-2

@@ -6,6 +6,7 @@ the widgets and Levoy's opacities against their formulas; refusals and the JSON 
 
 import json
 import math
+import os
 
 import numpy as np
 import pytest
@@ -292,3 +293,30 @@ def test_json_widgets_and_table(tmp_path):
     path.write_text(json.dumps({"table": np.zeros((2, 3, 4)).tolist(), "value_range": [0, 1]}))
     with pytest.raises(ValueError, match="gradient_range is missing"):
         load_tf2d_json(path)
+
+
+@pytest.mark.parametrize("changes", [{"optical_model": "absorption"},
+                                     {"illustration": ("boundary", "tone", "depth_cue")},
+                                     {"illustration": ("silhouette",), "shading": True}], ids=str)
+def test_optical_models_and_illustration_terms_take_a_2d_function(renderer, changes):
+    """The other optical models and the illustration terms with a 2D table: GL against the
+    reference within test_illustration's bound built on the 2D table's unlit one."""
+    from test_illustration import terms_tolerance
+    scene = dvr_gl.Scene(RAMP, TF2, cameras(RAMP)["perspective"], width=W, height=H, **changes)
+    opts = {"step": 0.7, "ert_transmittance": 0.0}
+    gl, ref = renderer.render(scene, **opts), reference.render(scene, **opts)
+    plan = get_technique("raycast").make_plan(scene, **opts)
+    assert np.abs(ref).max() > 0.05
+    bound = terms_tolerance(plan, tf2d_tolerance(plan, plan.max_segments), gradient_floor(RAMP))
+    assert metrics.max_abs_error(gl, ref) <= bound
+
+
+def test_cli_renders_a_2d_json_file(tmp_path):
+    from dvr_gl.cli import main
+    out = tmp_path / "head2d.png"
+    spec = os.path.join(os.path.dirname(__file__), os.pardir, "docs", "tf", "ct_skin_bone_2d.json")
+    assert main(["render", "builtin:ct_head", "--tf", spec, "--size", "48x40",
+                 "-o", str(out)]) == 0
+    from PIL import Image
+    rgb = np.asarray(Image.open(out), np.float64)
+    assert rgb.shape == (40, 48, 3) and (rgb < 200).any()     # something drawn over the white

@@ -20,13 +20,16 @@ def render_plan(plan, lut_exact=False):
     scene = plan.scene
     W, H = scene.width, scene.height
     out = np.zeros((H * W, 4))
-    for particle_set in plan.sets:
-        out += first_hits(scene, plan.radius, particle_set.points, particle_set.colors)
+    for k, particle_set in enumerate(plan.sets):
+        gradients = None if plan.gradients is None else plan.gradients[k]
+        out += first_hits(scene, plan.radius, particle_set.points, particle_set.colors, gradients)
     return (out / plan.repetitions).reshape(H, W, 4)
 
 
-def first_hits(scene, radius, points, colors):
-    """(H * W, 4): per pixel the colour (alpha 1) of the first sphere its ray enters, or 0."""
+def first_hits(scene, radius, points, colors, gradients=None):
+    """(H * W, 4): per pixel the colour (alpha 1) of the first sphere its ray enters, or 0;
+    with ``gradients`` (lit), that colour lit with the sphere's gradient along the pixel's
+    ray (GLSL ``shadeBlinnPhong``)."""
     W, H = scene.width, scene.height
     p = np.asarray(points, np.float64)
     kept, origins, dirs, chunks = sprite_pixel_pairs(scene, p, radius)
@@ -53,5 +56,14 @@ def first_hits(scene, radius, points, colors):
     out = np.zeros((W * H, 4))
     hit = owner >= 0
     out[hit, :3] = colors[owner[hit]]
+    if gradients is not None:
+        out[hit, :3] = lit_colors(scene, out[hit, :3], np.asarray(gradients, np.float64)[kept][owner[hit]],
+                                  dirs[hit])
     out[hit, 3] = 1.0
     return out
+
+
+def lit_colors(scene, colors, gradients, dirs):
+    """Straight colours of points lit with their gradients along the pixels' rays."""
+    from .shading import gradient_epsilon, scene_lights, shade_blinn_phong
+    return shade_blinn_phong(colors, gradients, dirs, scene.phong, gradient_epsilon(scene.volume), scene_lights(scene))

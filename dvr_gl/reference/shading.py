@@ -100,6 +100,26 @@ def gradient_epsilon(volume):
     return 1e-6 * scale / length
 
 
+def point_gradients(data, points, cells=None, vertices=None):
+    """(N, 3) float64 gradients at ``points`` relative to the data's lower corner (the
+    point primitives' centres): a grid's contract gradient there; on a mesh, the gradient
+    of each point's cell (``cells``, constant in a linear cell) or, for points that are
+    the mesh's ``vertices``, the volume-weighted mean of the gradients of the cells that
+    meet there."""
+    points = np.asarray(points, np.float64)
+    if not hasattr(data, "tets"):
+        return gradient(data, data.values(np.float64), points + data.bounds[0])
+    from ..techniques.tetra import cell_fields
+    g = cell_fields(data)[:, 0, :3].astype(np.float64)
+    if cells is not None:
+        return g[np.asarray(cells)]
+    volume = np.abs(data.signed_volumes())
+    total = np.bincount(data.tets.ravel(), np.repeat(volume, 4), minlength=data.n_points)
+    out = np.stack([np.bincount(data.tets.ravel(), np.repeat(volume * g[:, a], 4), minlength=data.n_points)
+                    for a in range(3)], axis=1)
+    return (out / np.where(total > 0, total, 1.0)[:, None])[np.asarray(vertices)]
+
+
 def gradient_max(volume, values=None):
     """The largest |g| anywhere in the box: the gradient interpolates the samples'
     gradients, and a norm of a convex combination is at most the largest norm. A

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .particles import lit_colors
 from .sprites import sprite_pixel_pairs
 
 
@@ -23,6 +24,7 @@ def render_plan(plan, lut_exact=False):
     centres = plan.splats.points[order].astype(np.float64)
     samples = plan.splats.samples[order].astype(np.float64)
     scales = plan.splats.scales[order].astype(np.float64)
+    gradients = None if plan.gradients is None else plan.gradients[order].astype(np.float64)
     inv_var = 1.0 / plan.sigma ** 2
     u = plan.kernel_uniforms()
     # draw position in the plan's order of each splat GL keeps
@@ -43,7 +45,10 @@ def render_plan(plan, lut_exact=False):
         pixels.append(pixel[hit])
         ranks.append(rank[ids][hit])
         alphas.append(alpha[hit])
-        colors.append(samples[rank[ids][hit], :3] * alpha[hit, None])
+        rgb = samples[rank[ids][hit], :3]
+        if gradients is not None:          # lit along each pixel's own ray
+            rgb = lit_colors(scene, rgb, gradients[rank[ids][hit]], d[hit])
+        colors.append(rgb * alpha[hit, None])
     out = np.zeros((H * W, 4))
     if not pixels:
         return out.reshape(H, W, 4)

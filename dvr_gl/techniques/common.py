@@ -14,7 +14,7 @@ TARGETS = {"rgba32f": "f4", "rgba16f": "f2", "rgba8": "f1"}
 
 
 SHADING_TECHNIQUES = ("raycast", "slice3d", "slice2d")   # those with every sample term and optical model
-LIGHTING_TECHNIQUES = SHADING_TECHNIQUES + ("tetra",)    # those that light composite samples
+LIGHTING_TECHNIQUES = SHADING_TECHNIQUES + ("tetra", "particles", "splat")   # those that light composite samples
 GRADIENTS = ("on_the_fly", "texture")
 
 
@@ -126,6 +126,14 @@ def preintegration_table(scene, step, tables):
 def preintegration_uniforms(table):
     """Uniforms of shaders/common/preintegration.glsl."""
     return {"u_pi_lo": table.lo, "u_pi_scale": table.scale, "u_pi_size": table.size}
+
+
+def point_shading_defines(scene):
+    """The lighting defines of the point primitives (particles, splats), whose gradients
+    come with each point: SHADING, and LIGHTS beyond the default headlight."""
+    if not scene.shading:
+        return {}
+    return {"SHADING": 1, **({} if scene.headlight_only else {"LIGHTS": 1})}
 
 
 def shading_defines(scene, gradients):

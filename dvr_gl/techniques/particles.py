@@ -22,6 +22,11 @@ target : "rgba32f" (default) | "rgba16f" | "rgba8": the averaged image's target.
 
 Particles are drawn as point sprites; a particle whose centre lies outside the view's
 clip volume is not drawn (GL clips points by their centre).
+
+Lighting (``Scene(shading=True)``): each particle carries the gradient at its centre (a
+mesh's particle, its cell's), computed once per set; a pixel's colour is the particle's
+colour lit with that gradient along the pixel's own ray (``shadeBlinnPhong``), so the
+averaged image converges to the lit emission-absorption integral.
 """
 
 from __future__ import annotations
@@ -36,7 +41,8 @@ from .. import particles as pbvr
 from ..cache import TableCache
 from ..progress import Progress
 from ..scene import Scene
-from .common import cleared_target, SizedTarget, bind, camera_uniforms, check_scene, check_target, data_projection
+from .common import (cleared_target, SizedTarget, bind, camera_uniforms, check_scene, check_target, data_projection,
+                     point_shading_defines, sample_term_uniforms)
 
 POINT_SPRITES = True  # drawn as GL points, which are clipped by their centres (see Renderer.render)
 MODES = ("composite",)
@@ -56,6 +62,7 @@ class ParticlesPlan:
     target: str = "rgba32f"
     defines: dict = field(default_factory=dict)
     generate_seconds: float = 0.0   # spent making particles for this plan (0 when cached)
+    gradients: list = None          # lit: (N, 3) float32 per set, the gradient at each particle
 
     @property
     def count(self):
@@ -106,9 +113,13 @@ def make_plan(scene, step=None, *, repetitions=1, seed=0, radius=None, sampler="
     sets = [pool[k] for k in range(repetitions)]
     timing = {"generate": time.perf_counter() - t0} if missing else {}
     defines = {"ORTHO": 1} if scene.camera.is_ortho else {}
+    defines.update(point_shading_defines(scene))
+    gradients = None
+    if scene.shading:      # once per set, with the set
+        gradients = [tables.get("particle_gradients", s, data, make=pbvr.particle_gradients) for s in sets]
     return ParticlesPlan(scene=scene, sets=sets, radius=radius, repetitions=repetitions,
                          seed=seed, sampler=sampler, target=target, defines=defines,
-                         generate_seconds=timing.get("generate", 0.0))
+                         generate_seconds=timing.get("generate", 0.0), gradients=gradients)
 
 
 def far_distance(scene):
@@ -139,13 +150,17 @@ def draw(renderer, plan):
     average = renderer.programs.get("tetra/fullscreen.vert", "particles/average.frag")
     uniforms = {**camera_uniforms(scene), "u_radius": plan.radius, "u_pixels_per_unit": pixels_per_unit(scene),
                 "u_inv_far": 1.0 / far_distance(scene)}
+    if scene.shading:
+        uniforms.update(sample_term_uniforms(renderer, scene, plan.defines))
     bind(prog, {}, uniforms)
     prog["u_view_proj"].write(data_projection(scene).astype("f4").tobytes())
     ctx.enable(ctx.PROGRAM_POINT_SIZE)
-    for particle_set in plan.sets:
+    for k, particle_set in enumerate(plan.sets):
         if particle_set.count == 0:
             continue
-        vao = renderer.resource("particles_vbo", particle_set, prog, make=lambda s=particle_set: _Points(ctx, prog, s),
+        gradients = None if plan.gradients is None else plan.gradients[k]
+        vao = renderer.resource("particles_vbo", particle_set, prog,
+                                make=lambda s=particle_set, g=gradients: _Points(ctx, prog, s, g),
                                 capacity=max(plan.repetitions, 2)).vao
         scratch.use()
         scratch.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
@@ -165,12 +180,17 @@ def draw(renderer, plan):
 
 
 class _Points:
-    """One particle set on the GPU: position and colour, 6 float32 per particle."""
+    """One particle set on the GPU: position and colour, 6 float32 per particle, and the
+    gradient when lit (9)."""
 
-    def __init__(self, ctx, prog, particle_set):
-        data = np.concatenate([particle_set.points, particle_set.colors], axis=1).astype(np.float32)
+    def __init__(self, ctx, prog, particle_set, gradients=None):
+        parts = [particle_set.points, particle_set.colors] + ([] if gradients is None else [gradients])
+        data = np.concatenate(parts, axis=1).astype(np.float32)
         self.vbo = ctx.buffer(np.ascontiguousarray(data).tobytes())
-        self.vao = ctx.vertex_array(prog, [(self.vbo, "3f 3f", "a_position", "a_color")])
+        if gradients is None:
+            self.vao = ctx.vertex_array(prog, [(self.vbo, "3f 3f", "a_position", "a_color")])
+        else:
+            self.vao = ctx.vertex_array(prog, [(self.vbo, "3f 3f 3f", "a_position", "a_color", "a_gradient")])
 
     def release(self):
         self.vao.release()

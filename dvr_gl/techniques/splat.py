@@ -24,6 +24,10 @@ Meshes: the samples are the mesh's points, each carrying its lumped volume (a qu
 every cell it is a corner of: the integral of its linear basis function), its kernel
 isotropic and ``radius`` times the mean length of the edges that meet there.
 
+Lighting (``Scene(shading=True)``): each splat carries the gradient at its centre (a
+mesh's vertex: the volume-weighted mean of its cells' gradients), and its colour is lit
+with it along each pixel's own ray before it is associated with the splat's opacity.
+
 Order: per view the samples are sorted by depth, back to front (float32 argsort), and
 drawn in that order (an index buffer); a splat counts only where its centre is ahead of
 the ray's start. Samples with zero opacity are not drawn. Samples are made once per
@@ -48,7 +52,8 @@ import numpy as np
 from ..cache import TableCache
 from ..reference.common import cell_is_valid, trilinear
 from ..scene import Scene
-from .common import cleared_target, bind, camera_uniforms, check_scene, check_target, data_projection
+from .common import (cleared_target, bind, camera_uniforms, check_scene, check_target, data_projection,
+                     point_shading_defines, sample_term_uniforms)
 from ..particles import extinction
 from .particles import pixels_per_unit
 
@@ -71,6 +76,7 @@ class Splats:
     samples: np.ndarray
     scales: np.ndarray
     spacing: np.ndarray
+    vertices: np.ndarray | None = None    # a mesh's: the vertex each splat is
 
     @property
     def count(self):
@@ -87,6 +93,7 @@ class SplatPlan:
     cutoff: float = DEFAULT_CUTOFF
     target: str = "rgba32f"
     defines: dict = field(default_factory=dict)
+    gradients: np.ndarray | None = None   # lit: (N, 3) float32, the gradient at each splat's centre
 
     @property
     def sigma(self):
@@ -150,7 +157,7 @@ def make_mesh_splats(mesh, tf):
     tau = tau[keep]
     samples = np.concatenate([tf.color(s[keep]).reshape(-1, 3), (tau * share[keep])[:, None]], axis=1)
     return Splats((mesh.points[keep] - mesh.bounds[0]).astype(np.float32), samples.astype(np.float32),
-                  (total[keep] / count[keep]).astype(np.float32), np.ones(3))
+                  (total[keep] / count[keep]).astype(np.float32), np.ones(3), np.flatnonzero(keep))
 
 
 def back_to_front(scene, splats):
@@ -187,8 +194,19 @@ def make_plan(scene, step=None, *, density=1, radius=DEFAULT_RADIUS, cutoff=DEFA
     order = tables.get("splat_order", splats, scene.camera,
                        make=lambda s, camera: back_to_front(scene, s))
     defines = {"ORTHO": 1} if scene.camera.is_ortho else {}
+    defines.update(point_shading_defines(scene))
+    gradients = None
+    if scene.shading:      # once per set of splats
+        gradients = tables.get("splat_gradients", splats, scene.volume, make=splat_gradients)
     return SplatPlan(scene=scene, splats=splats, order=order, density=int(density), radius=float(radius),
-                     cutoff=float(cutoff), target=target, defines=defines)
+                     cutoff=float(cutoff), target=target, defines=defines, gradients=gradients)
+
+
+def splat_gradients(splats, data):
+    """(N, 3) float32: the gradient at each splat's centre (a mesh's vertices: the
+    volume-weighted mean of their cells')."""
+    from ..reference.shading import point_gradients
+    return point_gradients(data, splats.points, vertices=splats.vertices).astype(np.float32)
 
 
 def draw(renderer, plan):
@@ -200,10 +218,12 @@ def draw(renderer, plan):
         return fbo
     prog = renderer.programs.get("splat/splat.vert", "splat/splat.frag", plan.defines)
     uniforms = {**camera_uniforms(scene), **plan.kernel_uniforms(), "u_pixels_per_unit": pixels_per_unit(scene)}
+    if scene.shading:
+        uniforms.update(sample_term_uniforms(renderer, scene, plan.defines))
     bind(prog, {}, uniforms)
     prog["u_view_proj"].write(data_projection(scene).astype("f4").tobytes())
-    gpu = renderer.resource("splat_vbo", plan.splats, prog, make=lambda: _SplatBuffers(ctx, prog, plan.splats),
-                            capacity=1)
+    gpu = renderer.resource("splat_vbo", plan.splats, prog,
+                            make=lambda: _SplatBuffers(ctx, prog, plan.splats, plan.gradients), capacity=1)
     vao = gpu.ordered(plan.order)
     ctx.disable(ctx.DEPTH_TEST)
     ctx.enable(ctx.BLEND | ctx.PROGRAM_POINT_SIZE)
@@ -217,13 +237,15 @@ def draw(renderer, plan):
 class _SplatBuffers:
     """The samples on the GPU (uploaded once) and the per-view order (an index buffer)."""
 
-    def __init__(self, ctx, prog, splats):
+    def __init__(self, ctx, prog, splats, gradients=None):
         self.ctx = ctx
-        data = np.concatenate([splats.points, splats.samples, splats.scales[:, None]], axis=1).astype(np.float32)
+        parts = [splats.points, splats.samples, splats.scales[:, None]] + ([] if gradients is None else [gradients])
+        data = np.concatenate(parts, axis=1).astype(np.float32)
         self.vbo = ctx.buffer(np.ascontiguousarray(data).tobytes())
         self.ibo = ctx.buffer(reserve=max(4 * splats.count, 4))
-        self.vao = ctx.vertex_array(prog, [(self.vbo, "3f 4f 1f", "a_position", "a_sample", "a_scale")],
-                                    index_buffer=self.ibo, index_element_size=4)
+        layout = [(self.vbo, "3f 4f 1f", "a_position", "a_sample", "a_scale")] if gradients is None else \
+            [(self.vbo, "3f 4f 1f 3f", "a_position", "a_sample", "a_scale", "a_gradient")]
+        self.vao = ctx.vertex_array(prog, layout, index_buffer=self.ibo, index_element_size=4)
         self.last = None
 
     def ordered(self, order):

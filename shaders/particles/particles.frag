@@ -1,14 +1,22 @@
 // The pixel's ray against the particle's sphere (NumPy twin: reference/particles.py):
 // kept where it passes within the radius, at the distance where it enters the sphere
 // (0 for an eye inside it), which the depth test compares. The colour (the transfer
-// function's at the particle) is opaque.
+// function's at the particle, lit with the particle's gradient when SHADING) is opaque.
 #version 330 core
 
 #ifndef ORTHO
 #define ORTHO 0
 #endif
 
+#ifndef SHADING
+#define SHADING 0
+#endif
+
 #include "common/camera_ray.glsl"
+#if SHADING
+#include "common/shading.glsl"
+flat in vec3 v_gradient;
+#endif
 
 flat in vec3 v_center;
 flat in vec3 v_color;
@@ -29,5 +37,9 @@ void main() {
     float half_chord = sqrt(miss);
     if (t + half_chord <= 0.0) discard;       // the sphere is behind the ray's start
     gl_FragDepth = clamp(max(t - half_chord, 0.0) * u_inv_far, 0.0, 1.0);
+#if SHADING
+    frag_color = vec4(shadeBlinnPhong(v_color, v_gradient, dir), 1.0);   // lit along this pixel's ray
+#else
     frag_color = vec4(v_color, 1.0);
+#endif
 }

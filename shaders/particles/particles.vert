@@ -5,6 +5,10 @@
 
 #include "common/sprite.glsl"
 
+#ifndef SHADING
+#define SHADING 0
+#endif
+
 in vec3 a_position;            // relative to the data's lower corner
 in vec3 a_color;               // the transfer function's colour at the particle
 
@@ -16,10 +20,17 @@ uniform float u_pixels_per_unit;   // pixels per world unit at unit depth (ortho
 
 flat out vec3 v_center;
 flat out vec3 v_color;
+#if SHADING
+in vec3 a_gradient;            // the field's gradient at the particle
+flat out vec3 v_gradient;
+#endif
 
 void main() {
     gl_Position = u_view_proj * vec4(a_position, 1.0);
     gl_PointSize = spriteSize(a_position, u_radius, u_eye, u_forward, u_pixels_per_unit);
     v_center = a_position;
     v_color = a_color;
+#if SHADING
+    v_gradient = a_gradient;
+#endif
 }

@@ -10,8 +10,16 @@
 #define ORTHO 0
 #endif
 
+#ifndef SHADING
+#define SHADING 0
+#endif
+
 #include "common/camera_ray.glsl"
 #include "common/compositing.glsl"
+#if SHADING
+#include "common/shading.glsl"
+flat in vec3 v_gradient;
+#endif
 
 flat in vec3 v_center;
 flat in vec4 v_sample;
@@ -38,5 +46,9 @@ void main() {
     if (m2 > u_cutoff2) discard;
     float depth = v_sample.a * u_norm / (v_scale * v_scale * v_scale) * inversesqrt(a) * exp(-0.5 * m2);
     float alpha = -expm1Accurate(-depth);
+#if SHADING
+    frag_color = vec4(shadeBlinnPhong(v_sample.rgb, v_gradient, dir) * alpha, alpha);   // lit along this ray
+#else
     frag_color = vec4(v_sample.rgb * alpha, alpha);
+#endif
 }

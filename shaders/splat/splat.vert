@@ -4,6 +4,10 @@
 
 #include "common/sprite.glsl"
 
+#ifndef SHADING
+#define SHADING 0
+#endif
+
 in vec3 a_position;            // relative to the data's lower corner
 in vec4 a_sample;              // the sample's colour, and its extinction times its volume share
 in float a_scale;              // the kernel's size relative to u_reach and the standard deviations
@@ -17,6 +21,10 @@ uniform float u_pixels_per_unit;
 flat out vec3 v_center;
 flat out vec4 v_sample;
 flat out float v_scale;
+#if SHADING
+in vec3 a_gradient;            // the field's gradient at the sample
+flat out vec3 v_gradient;
+#endif
 
 void main() {
     gl_Position = u_view_proj * vec4(a_position, 1.0);
@@ -24,4 +32,7 @@ void main() {
     v_center = a_position;
     v_sample = a_sample;
     v_scale = a_scale;
+#if SHADING
+    v_gradient = a_gradient;
+#endif
 }
