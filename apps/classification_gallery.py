@@ -36,7 +36,8 @@ def functions(volume, tf):
 
 
 def table_image(tf, volume, n_v=256, n_g=96):
-    """The function over (value, |g|): colour times opacity over white, |g| upwards."""
+    """The function over (value, |g|), |g| upwards: its colour over dark grey with the
+    opacity scaled to the function's largest (so faint functions show their shape)."""
     lo, hi = volume.data_range
     s = np.linspace(lo, hi, n_v)
     g = np.linspace(0.0, gradient_max(volume), n_g)
@@ -45,8 +46,8 @@ def table_image(tf, volume, n_v=256, n_g=96):
         rgba, _ = tf.lookup(S, G)
     else:
         rgba = np.concatenate([tf.color(S), tf.opacity(S)[..., None]], axis=-1)
-    a = rgba[..., 3:4]
-    return (rgba[..., :3] * a + (1 - a))[::-1]
+    a = rgba[..., 3:4] / max(float(rgba[..., 3].max()), 1e-12)
+    return (rgba[..., :3] * a + 0.15 * (1 - a))[::-1]
 
 
 def main(argv=None):
