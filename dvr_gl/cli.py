@@ -238,9 +238,11 @@ def cmd_render(args, out=None):
     if args.optical_model not in (None, "emission_absorption"):
         if args.optical_model == "sabella" and args.technique != "raycast":
             raise UsageError("--optical-model", f"sabella applies to --technique raycast, not {args.technique}")
-        if args.technique not in SHADING_TECHNIQUES:
+        cell_model = args.technique == "tetra" and args.optical_model in ("absorption", "emission")
+        if args.technique not in SHADING_TECHNIQUES and not cell_model:
             raise UsageError("--optical-model", f"{args.optical_model} applies to --technique "
-                                                f"{', '.join(SHADING_TECHNIQUES)}, not {args.technique}")
+                                                f"{', '.join(SHADING_TECHNIQUES)} (tetra: absorption, emission), "
+                                                f"not {args.technique}")
         if args.preintegrate:
             raise UsageError("--optical-model", f"{args.optical_model} is sampled at segment midpoints; "
                                                 "leave out --preintegrate")

@@ -380,6 +380,21 @@ def test_render_mesh_writes_what_the_library_renders(renderer, tiny_mesh, capsys
     assert f"scalars twice 0..{2 * mesh.data_range[1]:g}" in stdout and "sort centroid" in stdout and "rgba16f" in stdout
 
 
+def test_render_mesh_optical_models(renderer, tiny_mesh, capsys):
+    """tetra takes --optical-model absorption and emission (and refuses sabella)."""
+    d, mesh = tiny_mesh
+    scene = dvr_gl.Scene(mesh, auto_preset(mesh), first_camera(mesh), 32, 32)
+    for model, background in (("absorption", (1.0, 1.0, 1.0)), ("emission", (0.0, 0.0, 0.0))):
+        out = d / f"mesh_{model}.png"
+        code, _, err = _run(["render", d / "tiny.vtu", "--size", "32x32", "--optical-model", model, "--out", out],
+                            capsys, rgba=False)
+        assert code == 0, err
+        image = renderer.render(scene.replace(optical_model=model), technique="tetra")
+        assert np.array_equal(_png(out)[1], to_png_array(image, background))
+    code, _, err = _run(["render", d / "tiny.vtu", "--optical-model", "sabella", "--out", d / "x.png"], capsys)
+    assert code == 2 and "sabella applies to --technique raycast" in err
+
+
 def test_mesh_input_picks_tetra_and_takes_its_options(tiny_mesh, tiny):
     d, _ = tiny_mesh
     parser = cli.build_parser()

@@ -98,6 +98,20 @@ def mean_log1p(x):
     return np.where(np.abs(x) < 0.1, acc, big)
 
 
+def mean_f_log1p(x):
+    """G(x): the integral of g ln(1 + x g) over g in [0, 1], for x > -1 (the emission
+    integral's colour slope); its series below |x| = 0.1, where the closed form
+    ``ln(1 + x) / 2 - (x^2 / 2 - x + ln(1 + x)) / (2 x^2)`` would cancel."""
+    x = np.asarray(x, np.float64)
+    acc = np.zeros_like(x)
+    for k in range(8, 0, -1):           # x/3 - x^2/8 + x^3/15 - ...: (-1)^(k+1) x^k / (k (k + 2))
+        acc = x * (1.0 / (k * (k + 2)) - acc)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        l1 = np.log1p(np.maximum(x, -1.0 + 1e-300))
+        big = 0.5 * l1 - (0.5 * x * x - x + l1) / (2.0 * x * x)
+    return np.where(np.abs(x) < 0.1, acc, big)
+
+
 def optical_depth_to(f, nlw, r, l_over_u):
     """Optical depth from a piece's start to fraction f of it: with w = 1 - alpha going
     linearly from w_a to w_a (1 + r), ``l/u * f * (-ln w_a - H(r f))``."""
@@ -141,11 +155,24 @@ def _pieces(knots, sf, sb):
     return seg, j, a, b
 
 
-def linear_segment(knots: SegmentKnots, s_front, s_back, length):
+def linear_segment(knots: SegmentKnots, s_front, s_back, length, model="emission_absorption", weights=False):
     """Premultiplied (r, g, b, A) of segments (arrays broadcast) of the given lengths
-    along which the field goes linearly from s_front to s_back. Float64, (n, 4)."""
+    along which the field goes linearly from s_front to s_back, under the optical
+    ``model`` (GLSL ``linearSegment``): emission-absorption; absorption only, (0, A);
+    emission only, (integral of c tau, 0). Float64, (n, 4). With ``weights``, also what
+    a colour added along the segment is multiplied by: A, or for emission only the
+    optical depth."""
     sf, sb, L = (np.asarray(v, np.float64).ravel() for v in np.broadcast_arrays(s_front, s_back, length))
     out = np.zeros((sf.size, 4))
+    if model == "emission":
+        out = _emission_segment(knots, sf, sb, L, out)
+        depth = out[:, 3].copy()
+        out[:, 3] = 0.0
+        return (out, depth) if weights else out
+    if model == "absorption":
+        out = linear_segment(knots, sf, sb, L)
+        out[:, :3] = 0.0
+        return (out, out[:, 3]) if weights else out
     seg, j, a, b = _pieces(knots, sf, sb)
     ds = np.abs(sb - sf)[seg]
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -197,6 +224,32 @@ def linear_segment(knots: SegmentKnots, s_front, s_back, length):
     for ch in range(3):
         out[:, ch] = np.bincount(seg, T_before * C[:, ch], sf.size)
     out[:, 3] = np.bincount(seg, T_before * Al, sf.size)
+    return (out, out[:, 3]) if weights else out
+
+
+def _emission_segment(knots, sf, sb, L, out):
+    """Emission only: per piece, with c = c_a + (c_b - c_a) g and tau = (-ln w_a -
+    ln(1 + r g)) / u over the piece's fraction g, the integral of c tau is
+    ``l/u (-ln w_a (c_a + dc / 2) - c_a H(r) - dc G(r))`` (H ``mean_log1p``, G
+    ``mean_f_log1p``); the pieces add, nothing absorbs. Opacity 1 is refused upstream.
+    Returns the colours with the segments' optical depths in the alpha channel."""
+    seg, j, a, b = _pieces(knots, sf, sb)
+    ds = np.abs(sb - sf)[seg]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        frac = np.where(ds > 0, np.abs(b - a) / ds, 1.0)
+    lu = np.where(L[seg] > 0, L[seg] * frac, 0.0) * knots.inv_unit
+    ca, aa, wa = knots.at(j, a)
+    cb, ab, wb = knots.at(j, b)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        nlw = np.where(aa <= 0.5, -np.log1p(-np.minimum(aa, 0.5)), -np.log(wa))
+        r = np.where(wa > 0, (wb - wa) / wa, 0.0)
+    dc = cb - ca
+    C = lu[:, None] * (nlw[:, None] * (ca + 0.5 * dc) - ca * mean_log1p(r)[:, None] - dc * mean_f_log1p(r)[:, None])
+    C = np.where(((aa > 0) | (ab > 0))[:, None], C, 0.0)
+    for ch in range(3):
+        out[:, ch] = np.bincount(seg, C[:, ch], sf.size)
+    od = np.where((lu > 0) & ((aa > 0) | (ab > 0)), optical_depth_to(1.0, nlw, r, lu), 0.0)
+    out[:, 3] = np.bincount(seg, od, sf.size)
     return out
 
 

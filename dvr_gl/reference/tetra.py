@@ -37,15 +37,17 @@ def render_plan(plan, lut_exact=False):
     pix = seg["pixel"][order]
     length = (seg["t1"] - seg["t0"])[order]
     terms = sample_terms(scene, None)
+    model = scene.optical_model
     if terms is None:
-        rgba = linear_segment(plan.knots, seg["s0"][order], seg["s1"][order], length)
+        rgba = linear_segment(plan.knots, seg["s0"][order], seg["s1"][order], length, model)
     else:   # each cell's terms are constant (its gradient is): see shaders/tetra/tetra.frag
         from ..techniques.tetra import cell_fields
         grads = cell_fields(scene.volume)[seg["tet"][order], 0, :3]
         dirs = scene.camera.rays(W, H)[1].reshape(-1, 3)[pix]
         factor, offset, scale = terms.at(np.zeros_like(dirs), dirs, grad=grads)
-        rgba = linear_segment(plan.knots, seg["s0"][order], seg["s1"][order], length * scale)
-        rgba[:, :3] = rgba[:, :3] * factor[:, None] + offset * rgba[:, 3:4]
+        rgba, weight = linear_segment(plan.knots, seg["s0"][order], seg["s1"][order], length * scale, model,
+                                      weights=True)
+        rgba[:, :3] = rgba[:, :3] * factor[:, None] + offset * weight[:, None]
     # layer k of a pixel is its k-th fragment in draw order; blend layer by layer
     first = np.concatenate([[0], np.flatnonzero(pix[1:] != pix[:-1]) + 1])
     counts = np.diff(np.concatenate([first, [pix.size]]))

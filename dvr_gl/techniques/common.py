@@ -40,9 +40,12 @@ def check_scene(scene, technique, modes=None, data="volume"):
     if scene.optical_model == "sabella" and technique != "raycast":
         raise ValueError(f"{technique} composites segments in GL's blending, which cannot follow a ray's peak: "
                          f"optical_model 'sabella' is rendered by raycast")
-    if scene.optical_model != "emission_absorption" and technique not in SHADING_TECHNIQUES:
+    cell_models = ("absorption", "emission")     # tetra: each defined in closed form for a linear cell
+    if scene.optical_model != "emission_absorption" and technique not in SHADING_TECHNIQUES \
+            and not (technique == "tetra" and scene.optical_model in cell_models):
         raise ValueError(f"{technique} renders optical_model 'emission_absorption' only; "
-                         f"{scene.optical_model!r} is rendered by {', '.join(SHADING_TECHNIQUES)}")
+                         f"{scene.optical_model!r} is rendered by {', '.join(SHADING_TECHNIQUES)}"
+                         + (" (tetra: absorption and emission too)" if technique != "tetra" else ""))
     kinds = (data,) if isinstance(data, str) else tuple(data)      # a technique may take both
     if scene.is_mesh and "mesh" not in kinds:
         raise ValueError(f"{technique} renders a Volume (a grid); this scene holds a TetMesh: "

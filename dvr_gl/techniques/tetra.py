@@ -47,7 +47,7 @@ import numpy as np
 from ..cache import TableCache
 from ..mesh import LOCAL_FACES, Order, centroid_order, mpvo_order, topology, visible_cells
 from ..reference.linear_segment import SegmentKnots
-from ..scene import Scene
+from ..scene import OPTICAL_MODELS, Scene
 from .common import (sample_term_uniforms, cleared_target, SizedTarget, bind, camera_uniforms, check_scene, check_target, data_projection,
                      grow_pixels, knot_uniforms)
 
@@ -124,6 +124,8 @@ def make_plan(scene, step=None, *, sort="mpvo", target="rgba32f", tables=None):
     defines = {"KNOT_CAPACITY": knot_capacity(knots.count)}
     if scene.camera.is_ortho:
         defines["ORTHO"] = 1
+    if scene.optical_model != "emission_absorption":     # absorption (1) or emission (2) only
+        defines["OPTICAL_MODEL"] = OPTICAL_MODELS.index(scene.optical_model)
     if scene.shading or scene.illustration:   # terms of each cell's own (constant) gradient
         defines["SAMPLE_TERMS"] = 1
         defines.update({name.upper(): 1 for name in scene.illustration})

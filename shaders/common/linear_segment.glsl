@@ -2,6 +2,9 @@
 // (NumPy twin: reference.linear_segment, whose docstring derives it): cut at the transfer
 // function's knots; per piece the optical depth in closed form and the colour by parts,
 // its one integral by Gauss-Legendre (2 to 8 points); pieces composited front to back.
+// Absorption only keeps the opacity; emission only adds each piece's closed-form
+// integral of c tau and returns (that colour, the segment's optical depth): the caller
+// weighs colour terms by the depth, then sets alpha to 0 (nothing absorbs).
 #ifndef DVR_LINEAR_SEGMENT_GLSL
 #define DVR_LINEAR_SEGMENT_GLSL
 
@@ -9,6 +12,9 @@
 
 #ifndef KNOT_CAPACITY
 #define KNOT_CAPACITY 4
+#endif
+#ifndef OPTICAL_MODEL
+#define OPTICAL_MODEL 0   // 0 emission-absorption, 1 absorption only, 2 emission only
 #endif
 
 // The transfer function's knots as uniforms (cheaper to index than a texture):
@@ -57,6 +63,17 @@ float meanLog1p(float x) {
     }
     if (x <= -1.0) return -1.0;
     return (1.0 + x) * log(1.0 + x) / x - 1.0;
+}
+
+// G(x): the integral of g ln(1 + x g) over g in [0, 1], x > -1 (series below |x| = 0.1).
+float meanFLog1p(float x) {
+    if (abs(x) < 0.1) {
+        float acc = 0.0;
+        for (int k = 8; k >= 1; k--) acc = x * (1.0 / float(k * (k + 2)) - acc);
+        return acc;
+    }
+    float l1 = log(1.0 + x);
+    return 0.5 * l1 - (0.5 * x * x - x + l1) / (2.0 * x * x);
 }
 
 // Optical depth from a piece's start to fraction f of it (w = 1 - alpha going linearly
@@ -120,6 +137,20 @@ vec4 linearSegment(float s_front, float s_back, float len) {
             compositeFrontToBack(color, alpha_acc, ca, 1.0);
             break;
         }
+#if OPTICAL_MODEL == 2
+        // emission only: the integral of c tau over the piece, nothing absorbed (alpha < 1
+        // everywhere: the scene refuses opacity 1)
+        if (l > 0.0 && (aa > 0.0 || ab > 0.0)) {
+            float nlw = aa <= 0.5 ? -log1pAccurate(-aa) : -log(wa);
+            float r = (wb - wa) / wa;
+            color += l * u_inv_unit * (nlw * (ca + 0.5 * (cb - ca)) - ca * meanLog1p(r) - (cb - ca) * meanFLog1p(r));
+            alpha_acc += opticalDepthTo(1.0, nlw, r, l * u_inv_unit);   // the weight of an added colour
+        }
+        a = b;
+        if ((up && a >= s_back) || (!up && a <= s_back)) break;
+        j += up ? 1 : -1;
+        continue;
+#endif
         if (l > 0.0 && (aa > 0.0 || ab > 0.0)) {
             float lu = l * u_inv_unit;
             float nlw = aa <= 0.5 ? -log1pAccurate(-aa) : -log(wa);
@@ -161,6 +192,9 @@ vec4 linearSegment(float s_front, float s_back, float len) {
         if ((up && a >= s_back) || (!up && a <= s_back)) break;
         j += up ? 1 : -1;
     }
+#if OPTICAL_MODEL == 1
+    color = vec3(0.0);      // absorption only
+#endif
     return vec4(color, alpha_acc);
 }
 

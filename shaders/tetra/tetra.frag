@@ -107,5 +107,8 @@ void main() {
   #else
     frag_color = linearSegment(s_front, s_back, t_out - t_in);
   #endif
+  #if OPTICAL_MODEL == 2
+    frag_color.a = 0.0;     // emission only: the alpha channel held the optical depth
+  #endif
 #endif
 }
