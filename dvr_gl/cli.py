@@ -276,10 +276,9 @@ def cmd_render(args, out=None):
     if args.illustration:
         if mode != "composite":
             raise UsageError("--illustration", f"applies to --mode composite, not --mode {mode}")
-        cell_terms = args.technique == "tetra" and "depth_cue" not in args.illustration
-        if args.technique not in SHADING_TECHNIQUES and not cell_terms:
+        if args.technique not in SHADING_TECHNIQUES + ("tetra",):
             raise UsageError("--illustration", f"applies to --technique {', '.join(SHADING_TECHNIQUES)} "
-                                               f"(tetra: boundary, silhouette, tone), not {args.technique}")
+                                               f"and tetra, not {args.technique}")
         if args.preintegrate and {"boundary", "silhouette"} & set(args.illustration):
             raise UsageError("--illustration", "boundary and silhouette scale the extinction per sample; "
                                                "leave out --preintegrate")

@@ -259,3 +259,65 @@ def test_the_variants_compiled_and_the_textures_made_are_exactly_what_the_scenes
             assert compiled - seen == {repr(dict(sorted(defines.items())))}, (compiled - seen, defines)
             seen |= compiled
             assert {kind for kind, _ in r.created[before:]} == textures
+
+
+# -- projected tetrahedra: the depth cue integrated along each cell's segment ---------------
+
+def cued_box_closed_form(scene, colour, tau):
+    """A constant block with a depth cue: along a chord [t0, t1] the cue q(t) = a + b t is
+    linear (depth is), so C = c tau integral of q(t) e^(-tau (t - t0)) dt in closed form."""
+    from dvr_gl.reference.common import box_rays
+    from dvr_gl.reference.shading import depth_range
+    o, d, t0, t1 = box_rays(scene)
+    cam = scene.camera
+    lo, _ = scene.volume.bounds
+    near, far = depth_range(scene)
+    strength = scene.illustration.get("depth_cue", (0.0,))[0]
+    depth0 = (o + t0[:, None] * d + lo - cam.eye) @ cam.forward
+    rate = d @ cam.forward
+    a = 1 - strength * (depth0 - near) / (far - near)
+    b = -strength * rate / (far - near)
+    L = np.maximum(t1 - t0, 0)
+    e = np.exp(-tau * L)
+    integral = a * (1 - e) / tau + b * (1 - e * (1 + tau * L)) / tau ** 2
+    out = np.zeros((scene.height * scene.width, 4))
+    out[:, :3] = np.outer(tau * integral, colour)
+    out[:, 3] = 1 - e
+    return out.reshape(scene.height, scene.width, 4)
+
+
+@pytest.mark.parametrize("camera", ["perspective", "ortho", "eye_inside"])
+def test_tetra_depth_cue_on_a_constant_block_is_the_closed_form(renderer, camera):
+    """Exact image, tetra reference and GL against the closed form (GL to float32 over the
+    cells a ray crosses)."""
+    from test_optical_models import BOX_TF, COLOUR, ALPHA, UNIT, box_cameras, constant_block_mesh
+    mesh = constant_block_mesh()
+    scene = dvr_gl.Scene(mesh, BOX_TF, box_cameras(mesh)[camera], width=W, height=H,
+                         illustration={"depth_cue": 0.7})
+    want = cued_box_closed_form(scene, COLOUR, -math.log(1 - ALPHA) / UNIT)
+    plain = cued_box_closed_form(scene.replace(illustration=None), COLOUR, -math.log(1 - ALPHA) / UNIT)
+    assert metrics.max_abs_error(want, plain) > 0.05, "the cue must change the picture"
+    np.testing.assert_allclose(reference.exact(scene, cache=False), want, rtol=0, atol=1e-10)
+    np.testing.assert_allclose(reference.render(scene, technique="tetra"), want, rtol=0, atol=1e-9)
+    assert metrics.max_abs_error(renderer.render(scene, technique="tetra"), want) <= 1e-5
+
+
+@pytest.mark.parametrize("lit", [False, True])
+def test_tetra_depth_cue_matches_the_reference_and_the_exact_image(renderer, lit):
+    """The Delaunay ball, depth-cued (and lit with tone): GL against its reference and the
+    reference against the exact image within test_tetra's bound times the brightest
+    colour."""
+    from dvr_gl import data as bundled
+    from test_tetra import GL_TOL
+    mesh = bundled.delaunay_ball()
+    scene = dvr_gl.Scene(mesh, bundled.synthetic_tf(), dvr_gl.default_camera(mesh, azimuth=20, elevation=10),
+                         width=48, height=40, shading=lit,
+                         illustration=("depth_cue", "tone") if lit else ("depth_cue",))
+    gl = renderer.render(scene, technique="tetra")
+    ref = reference.render(scene, technique="tetra")
+    plain = reference.render(scene.replace(illustration=("tone",) if lit else None), technique="tetra")
+    assert metrics.max_abs_error(ref, plain) > 0.02, "the cue must change the picture"
+    ka, kd, ks, _ = scene.phong
+    bound = GL_TOL * ((ka + kd + ks + 0.4) if lit else 1.0)
+    assert metrics.max_abs_error(gl, ref) <= bound
+    assert metrics.max_abs_error(ref, reference.exact(scene, cache=False)) <= bound

@@ -357,10 +357,10 @@ def test_shading_is_refused_where_it_is_not_defined():
     mesh_scene = dvr_gl.Scene(mesh, TF, dvr_gl.default_camera(mesh), width=16, height=16, shading=True)
     assert get_technique("tetra").make_plan(mesh_scene).defines.get("SHADING") == 1   # cells light
     assert get_technique("tetra").make_plan(mesh_scene.replace(illustration="tone")).defines.get("TONE") == 1
-    with pytest.raises(ValueError, match="depth_cue varies along a segment"):
-        get_technique("tetra").make_plan(mesh_scene.replace(illustration="depth_cue"))
-    with pytest.raises(ValueError, match="depth_cue is defined for grids here"):
-        reference.exact(mesh_scene.replace(illustration="depth_cue"), cache=False)
+    assert get_technique("tetra").make_plan(mesh_scene.replace(illustration="depth_cue")).defines.get("DEPTH_CUE") == 1
+    with pytest.raises(ValueError, match="tetra integrates depth_cue along each cell's segment"):
+        get_technique("tetra").make_plan(mesh_scene.replace(illustration="depth_cue", shading=False,
+                                                            optical_model="emission"))
 
 
 # -- meshes: each cell lit with its own (constant) gradient ----------------------------------

@@ -424,7 +424,7 @@ class _Classified:
         if "factor" in geo:
             return c * geo["factor"][rows][:, None] + geo["offset"][rows]
         points = geo["base"][rows] + tau[:, None] * geo["hd"][rows]
-        factor, offset, _ = self.lighting(points, geo["dir"][rows])
+        factor, offset, _ = self.lighting(points, geo["dir"][rows], grad=geo["grad"][rows] if "grad" in geo else None)
         return c * factor[:, None] + offset
 
     def gk(self, coef, h, m, cend, ta, tb, geo=None):
@@ -450,8 +450,9 @@ class _Classified:
                 alpha = np.clip(rgba[..., 3], 0.0, _ALPHA_MAX)
                 tau = -np.log1p(-alpha) * self.inv_u
                 node_color = np.zeros(rgba.shape[:-1] + (3,)) if self.absorption else rgba[..., :3]
-            else:
-                factor, offset, scale = self.lighting(points, geo["dir"][:, None, :])
+            else:   # (a mesh's pieces carry their cell's gradient)
+                factor, offset, scale = self.lighting(points, geo["dir"][:, None, :],
+                                                      grad=geo["grad"][:, None, :] if "grad" in geo else None)
             tau = tau * scale
         hw = h * half                             # half-length of the part in t
         Tk = np.exp(-hw[:, None] * (tau @ _SK.T))   # transmittance from the part's start
@@ -754,9 +755,13 @@ class _MeshExact(_Classified):
         if self.terms is not None:
             from ..techniques.tetra import cell_fields
             self.gradients = cell_fields(self.mesh)[:, 0, :3]
-            self.dirs = scene.camera.rays(scene.width, scene.height)[1].reshape(-1, 3)
+            origins, dirs = scene.camera.rays(scene.width, scene.height)
+            self.origins, self.dirs = origins.reshape(-1, 3), dirs.reshape(-1, 3)
             self.piece_keys = ("factor", "offset", "scale")
             self.scale_floor = self.terms.scale_floor
+            if "depth_cue" in scene.illustration:   # varies along a piece: the terms at every node
+                self.lighting = self.terms.at
+                self.piece_keys = ("base", "hd", "dir", "grad")
 
     @staticmethod
     def _pieces(seg, idx, rows):
@@ -788,7 +793,13 @@ class _MeshExact(_Classified):
                 a, rows = np.unique(ray[idx], return_inverse=True)
                 T = np.exp(-od[a])
                 P = self._pieces(seg, idx, rows)
-                if self.piece_keys:     # each cell's terms are constant along its piece
+                if "base" in self.piece_keys:     # the terms at every node (the depth cue)
+                    pixel = seg["pixel"][idx]
+                    P["base"] = self.origins[pixel] + P["tm"][:, None] * self.dirs[pixel]
+                    P["hd"] = P["h"][:, None] * self.dirs[pixel]
+                    P["dir"] = self.dirs[pixel]
+                    P["grad"] = self.gradients[seg["tet"][idx]]
+                elif self.piece_keys:     # each cell's terms are constant along its piece
                     dirs = self.dirs[seg["pixel"][idx]]
                     P["factor"], P["offset"], P["scale"] = self.terms.at(
                         np.zeros_like(dirs), dirs, grad=self.gradients[seg["tet"][idx]])
@@ -991,9 +1002,6 @@ def exact(scene, cache=True, cache_dir=None) -> np.ndarray:
         raise TypeError(f"scene must be a dvr_gl.Scene, got {type(scene).__name__}")
     if scene.is_mesh and scene.optical_model == "sabella":
         raise ValueError("optical_model='sabella' is defined here for grids (the peak of the trilinear field)")
-    if scene.is_mesh and "depth_cue" in scene.illustration:
-        raise ValueError("depth_cue is defined for grids here; a TetMesh scene takes lighting, boundary, "
-                         "silhouette and tone, with each cell's own gradient")
     path = None
     if cache:
         directory = _cache_dir(cache_dir)

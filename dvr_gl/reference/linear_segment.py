@@ -155,12 +155,15 @@ def _pieces(knots, sf, sb):
     return seg, j, a, b
 
 
-def linear_segment(knots: SegmentKnots, s_front, s_back, length, model="emission_absorption", weights=False):
+def linear_segment(knots: SegmentKnots, s_front, s_back, length, model="emission_absorption", weights=False,
+                   cue=None):
     """Premultiplied (r, g, b, A) of segments (arrays broadcast) of the given lengths
     along which the field goes linearly from s_front to s_back, under the optical
-    ``model`` (GLSL ``linearSegment``): emission-absorption; absorption only, (0, A);
-    emission only, (integral of c tau, 0). Float64, (n, 4). With ``weights``, also what
-    a colour added along the segment is multiplied by: A, or for emission only the
+    ``model`` (GLSL ``linearSegmentCued``): emission-absorption; absorption only, (0, A);
+    emission only, (integral of c tau, 0). Float64, (n, 4). ``cue`` = (q_front, q_back)
+    multiplies the colour by a factor going linearly between them along each segment (a
+    depth cue; not with emission only). With ``weights``, also what a colour added along
+    the segment is multiplied by: A (weighted by the cue), or for emission only the
     optical depth."""
     sf, sb, L = (np.asarray(v, np.float64).ravel() for v in np.broadcast_arrays(s_front, s_back, length))
     out = np.zeros((sf.size, 4))
@@ -170,9 +173,11 @@ def linear_segment(knots: SegmentKnots, s_front, s_back, length, model="emission
         out[:, 3] = 0.0
         return (out, depth) if weights else out
     if model == "absorption":
-        out = linear_segment(knots, sf, sb, L)
+        out, weight = linear_segment(knots, sf, sb, L, weights=True, cue=cue)
         out[:, :3] = 0.0
-        return (out, out[:, 3]) if weights else out
+        return (out, weight) if weights else out
+    qf, qb_seg = (np.ones(sf.size), np.ones(sf.size)) if cue is None else \
+        (np.broadcast_to(np.asarray(q, np.float64).ravel(), sf.shape) for q in cue)
     seg, j, a, b = _pieces(knots, sf, sb)
     ds = np.abs(sb - sf)[seg]
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -180,15 +185,21 @@ def linear_segment(knots: SegmentKnots, s_front, s_back, length, model="emission
     lp = np.where(L[seg] > 0, L[seg] * frac, 0.0)
     ca, aa, wa = knots.at(j, a)
     cb, ab, wb = knots.at(j, b)
+    # the cue at the piece's ends: linear along the segment, as the field is
+    with np.errstate(divide="ignore", invalid="ignore"):
+        qa = np.where(ds > 0, qf[seg] + (qb_seg[seg] - qf[seg]) * np.abs(a - sf[seg]) / ds, qf[seg])
+        qb = np.where(ds > 0, qf[seg] + (qb_seg[seg] - qf[seg]) * np.abs(b - sf[seg]) / ds, qb_seg[seg])
     lu = lp * knots.inv_unit
     with np.errstate(divide="ignore", invalid="ignore"):
         nlw = np.where(aa <= 0.5, -np.log1p(-np.minimum(aa, 0.5)), -np.log(wa))
         r = np.where(wa > 0, (wb - wa) / wa, 0.0)
     od = np.where(lp > 0, optical_depth_to(1.0, nlw, r, lu), 0.0)
     od = np.where(wa > 0, od, 0.0)
-    # colour: c_a (1 - T_l) + (c_b - c_a) mean[T(t) - T_l]
+    # colour, by parts with g = c q: g(0) (1 - T_l) + integral g'(f) (T(f) - T_l) df, from
+    # mean[T(f) - T_l] and mean[f (T(f) - T_l)]
     Al = -np.expm1(-od)
     mean = np.zeros(seg.size)
+    mean_f = np.zeros(seg.size)
     graded = wb <= 0
     parts = np.clip(np.ceil(od), 1, MAX_PARTS)
     nodes = np.where(graded, 8, node_count(od, r))
@@ -205,17 +216,25 @@ def linear_segment(knots: SegmentKnots, s_front, s_back, length, model="emission
                 f = f0 + x * (f1 - f0)
                 od_to = optical_depth_to(f, nlw[sel], r[sel], lu[sel])
                 val = np.exp(-od_to) * -np.expm1(-np.maximum(od[sel] - od_to, 0.0))
-                mean[sel] += np.where(act & (od_to < DEEP), wgt * (f1 - f0) * val, 0.0)
+                term = np.where(act & (od_to < DEEP), wgt * (f1 - f0) * val, 0.0)
+                mean[sel] += term
+                mean_f[sel] += f * term
             if not act.any():
                 break
-    C = ca * Al[:, None] + (cb - ca) * mean[:, None]
+    dq = qb - qa
+    dc = cb - ca
+    C = (ca * (qa * Al)[:, None] + (dc * qa[:, None] + ca * dq[:, None]) * mean[:, None]
+         + 2.0 * dc * (dq * mean_f)[:, None])
+    Q = qa * Al + dq * mean                     # the opacity weighted by the cue
     # alpha = 1 at a piece's start or end ends the segment there
     opaque_start = wa <= 0
     opaque_end = wb <= 0
-    C = np.where(opaque_start[:, None], ca, C)
+    C = np.where(opaque_start[:, None], ca * qa[:, None], C)
+    Q = np.where(opaque_start, qa, Q)
     Al = np.where(opaque_start, 1.0, Al)
     T_end = np.where(opaque_end & ~opaque_start, np.exp(-od), 0.0)
-    C = C + T_end[:, None] * cb
+    C = C + (T_end * qb)[:, None] * cb
+    Q = Q + T_end * qb
     Al = np.where(opaque_end, 1.0, Al)
     # front-to-back over the pieces of each segment (pieces are ordered by segment)
     with np.errstate(divide="ignore"):
@@ -224,7 +243,7 @@ def linear_segment(knots: SegmentKnots, s_front, s_back, length, model="emission
     for ch in range(3):
         out[:, ch] = np.bincount(seg, T_before * C[:, ch], sf.size)
     out[:, 3] = np.bincount(seg, T_before * Al, sf.size)
-    return (out, out[:, 3]) if weights else out
+    return (out, np.bincount(seg, T_before * Q, sf.size)) if weights else out
 
 
 def _emission_segment(knots, sf, sb, L, out):

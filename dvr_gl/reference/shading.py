@@ -166,15 +166,23 @@ class SampleTerms:
         self.scale_floor = float(np.prod([min(self.terms[name][0], 1.0) for name in ("boundary", "silhouette")
                                           if name in self.terms]))
 
-    def at(self, points, dirs, grad=None):
+    def at(self, points, dirs, grad=None, depth_cue=True):
         """(factor, offset, scale) at ``points`` seen along ``dirs``; ``grad`` gives the
-        gradients instead of reading them (a mesh's cells)."""
+        gradients instead of reading them (a mesh's cells); ``depth_cue=False`` leaves the
+        depth cue out (projected tetrahedra integrate it along the segment)."""
         points = np.asarray(points, np.float64)
         if grad is not None:
             g = np.broadcast_to(grad, points.shape)
         else:
             g = gradient(self.volume, self.values, points) if self.needs_gradient else None
-        return self._terms(points, np.broadcast_to(dirs, points.shape), g)
+        return self._terms(points, np.broadcast_to(dirs, points.shape), g, depth_cue)
+
+    def cue(self, points):
+        """The depth cue's colour factor at world ``points`` (GLSL ``depthCue``)."""
+        near, far = self.depths
+        cam = self.scene.camera
+        u = np.clip(((np.asarray(points, np.float64) - cam.eye) @ cam.forward - near) / (far - near), 0, 1)
+        return 1 - self.terms["depth_cue"][0] * u
 
     def classify(self, points, dirs, s):
         """A scene with a 2D transfer function: (rgba, transparency) of the values ``s`` at
@@ -185,7 +193,7 @@ class SampleTerms:
         rgba, transparency = self.scene.tf_2d.lookup(s, np.linalg.norm(g, axis=-1))
         return (rgba, transparency) + self._terms(points, np.broadcast_to(dirs, points.shape), g)
 
-    def _terms(self, points, dirs, g):
+    def _terms(self, points, dirs, g, depth_cue=True):
         shape = points.shape[:-1]
         factor = np.ones(shape)
         offset = np.zeros(shape + (3,))
@@ -210,11 +218,8 @@ class SampleTerms:
             kc, ks, ke = self.terms["silhouette"]
             facing = np.abs(np.sum(n * dirs, axis=-1))
             scale = scale * np.where(ok, kc + ks * np.maximum(1 - facing, 0) ** ke, 1.0)
-        if self.depths is not None:
-            near, far = self.depths
-            cam = self.scene.camera
-            u = np.clip(((points - cam.eye) @ cam.forward - near) / (far - near), 0, 1)
-            cue = 1 - self.terms["depth_cue"][0] * u
+        if self.depths is not None and depth_cue:
+            cue = self.cue(points)
             factor = factor * cue
             offset = offset * cue[..., None]
         return factor, offset, scale

@@ -44,9 +44,14 @@ def render_plan(plan, lut_exact=False):
         from ..techniques.tetra import cell_fields
         grads = cell_fields(scene.volume)[seg["tet"][order], 0, :3]
         dirs = scene.camera.rays(W, H)[1].reshape(-1, 3)[pix]
-        factor, offset, scale = terms.at(np.zeros_like(dirs), dirs, grad=grads)
+        factor, offset, scale = terms.at(np.zeros_like(dirs), dirs, grad=grads, depth_cue=False)
+        cue = None
+        if "depth_cue" in scene.illustration:     # linear along each segment: integrated with it
+            lo = scene.volume.bounds[0]
+            origins = scene.camera.rays(W, H)[0].reshape(-1, 3)[pix] - lo
+            cue = tuple(terms.cue(origins + seg[t][order][:, None] * dirs + lo) for t in ("t0", "t1"))
         rgba, weight = linear_segment(plan.knots, seg["s0"][order], seg["s1"][order], length * scale, model,
-                                      weights=True)
+                                      weights=True, cue=cue)
         rgba[:, :3] = rgba[:, :3] * factor[:, None] + offset * weight[:, None]
     # layer k of a pixel is its k-th fragment in draw order; blend layer by layer
     first = np.concatenate([[0], np.flatnonzero(pix[1:] != pix[:-1]) + 1])

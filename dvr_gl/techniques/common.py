@@ -25,12 +25,12 @@ def check_scene(scene, technique, modes=None, data="volume"):
     if not isinstance(scene, Scene):
         raise TypeError(f"scene must be a dvr_gl.Scene, got {type(scene).__name__}")
     if scene.illustration and technique not in SHADING_TECHNIQUES:
-        if technique == "tetra" and "depth_cue" in scene.illustration:
-            raise ValueError("tetra's cells take boundary, silhouette and tone (constant in a linear cell); "
-                             "depth_cue varies along a segment: render it with raycast, slice3d or slice2d")
+        if technique == "tetra" and "depth_cue" in scene.illustration and scene.optical_model == "emission":
+            raise ValueError("tetra integrates depth_cue along each cell's segment for emission-absorption and "
+                             "absorption; with optical_model 'emission' render it with raycast, slice3d or slice2d")
         if technique != "tetra":
             raise ValueError(f"{technique} has no illustration terms yet: they are rendered by "
-                             f"{', '.join(SHADING_TECHNIQUES)} (tetra: boundary, silhouette, tone)")
+                             f"{', '.join(SHADING_TECHNIQUES)} and tetra")
     if scene.tf_2d is not None and technique not in SHADING_TECHNIQUES:
         raise ValueError(f"{technique} classifies by value alone; a TransferFunction2D (value and gradient "
                          f"magnitude) is rendered by {', '.join(SHADING_TECHNIQUES)}")

@@ -112,8 +112,11 @@ int knotsBelow(float s, bool strict) {
 }
 
 // Premultiplied (C, A) of a segment len long, the field going linearly from s_front
-// (nearest the eye) to s_back.
-vec4 linearSegment(float s_front, float s_back, float len) {
+// (nearest the eye) to s_back, with the colour times a factor going linearly from
+// q_front to q_back along it (a depth cue; 1 and 1 without one). cued_alpha is the
+// opacity weighted the same way: what a colour added along the segment is multiplied by.
+vec4 linearSegmentCued(float s_front, float s_back, float len, float q_front, float q_back, out float cued_alpha) {
+    cued_alpha = 0.0;
     if (len <= 0.0) return vec4(0.0);
     bool up = s_back >= s_front;
     int j = up ? knotsBelow(s_front, false) - 1 : knotsBelow(s_front, true) - 1;
@@ -133,8 +136,12 @@ vec4 linearSegment(float s_front, float s_back, float len) {
         float aa, wa, ab, wb;
         knotLine(j, a, ca, aa, wa);
         knotLine(j, b, cb, ab, wb);
+        // the factor at the piece's ends (linear along the segment, as the field is)
+        float qa = ds > 0.0 ? mix(q_front, q_back, abs(a - s_front) / ds) : q_front;
+        float qb = ds > 0.0 ? mix(q_front, q_back, abs(b - s_front) / ds) : q_back;
         if (wa <= 0.0) {                       // alpha = 1 here: the ray ends
-            compositeFrontToBack(color, alpha_acc, ca, 1.0);
+            cued_alpha += (1.0 - alpha_acc) * qa;
+            compositeFrontToBack(color, alpha_acc, ca * qa, 1.0);
             break;
         }
 #if OPTICAL_MODEL == 2
@@ -144,7 +151,9 @@ vec4 linearSegment(float s_front, float s_back, float len) {
             float nlw = aa <= 0.5 ? -log1pAccurate(-aa) : -log(wa);
             float r = (wb - wa) / wa;
             color += l * u_inv_unit * (nlw * (ca + 0.5 * (cb - ca)) - ca * meanLog1p(r) - (cb - ca) * meanFLog1p(r));
-            alpha_acc += opticalDepthTo(1.0, nlw, r, l * u_inv_unit);   // the weight of an added colour
+            float od = opticalDepthTo(1.0, nlw, r, l * u_inv_unit);
+            alpha_acc += od;           // the weight of an added colour (the caller zeroes alpha)
+            cued_alpha += od;
         }
         a = b;
         if ((up && a >= s_back) || (!up && a <= s_back)) break;
@@ -165,26 +174,37 @@ vec4 linearSegment(float s_front, float s_back, float len) {
             if (!graded && od <= 0.01 && ar <= 0.01) { first = 0; count = 2; }
             else if (!graded && od <= 0.1 && ar <= 0.1) { first = 2; count = 3; }
             else if (!graded && od <= 0.3 && ar <= 0.3) { first = 5; count = 4; }
-            float mean = 0.0;
+            float mean = 0.0;              // the mean of T(f) - T(1) over the piece
+            float mean_f = 0.0;            // ... of f (T(f) - T(1)), for a depth cue
             if (count == 2) {              // the common thin piece: straight-line code
-                mean = 0.5 * (thinNodeTerm(GL_X[0], nlw, r, lu, od) + thinNodeTerm(GL_X[1], nlw, r, lu, od));
+                float n0 = thinNodeTerm(GL_X[0], nlw, r, lu, od), n1 = thinNodeTerm(GL_X[1], nlw, r, lu, od);
+                mean = 0.5 * (n0 + n1);
+                mean_f = 0.5 * (GL_X[0] * n0 + GL_X[1] * n1);
             } else {
                 for (int p = 0; p < parts; p++) {
                     float f0 = graded ? 1.0 - exp2(-float(p)) : float(p) / float(parts);
                     float f1 = graded ? (p == parts - 1 ? 1.0 : 1.0 - exp2(-float(p + 1))) : float(p + 1) / float(parts);
                     for (int i = first; i < first + count; i++) {
-                        mean += GL_W[i] * (f1 - f0) * nodeTerm(f0 + GL_X[i] * (f1 - f0), nlw, r, lu, od);
+                        float f = f0 + GL_X[i] * (f1 - f0);
+                        float term = GL_W[i] * (f1 - f0) * nodeTerm(f, nlw, r, lu, od);
+                        mean += term;
+                        mean_f += f * term;
                     }
                 }
             }
-            vec3 C = ca * A + (cb - ca) * mean;
+            // by parts, with g = c q along the piece: C = g(0) A + integral g'(f) (T(f) - T(1))
+            float dq = qb - qa;
+            vec3 C = ca * qa * A + ((cb - ca) * qa + ca * dq) * mean + 2.0 * (cb - ca) * dq * mean_f;
+            float Q = qa * A + dq * mean;          // the same for the opacity weighted by q
             if (graded) {                      // alpha = 1 at the far end: the ray ends there
-                C += exp(-od) * cb;
+                C += exp(-od) * cb * qb;
+                Q += exp(-od) * qb;
                 A = 1.0;
             }
             // C is already associated: composite it with the piece's opacity
             float weight = 1.0 - alpha_acc;
             color += weight * C;
+            cued_alpha += weight * Q;
             alpha_acc += weight * A;
             if (graded) break;
         }
@@ -196,6 +216,12 @@ vec4 linearSegment(float s_front, float s_back, float len) {
     color = vec3(0.0);      // absorption only
 #endif
     return vec4(color, alpha_acc);
+}
+
+// Without a factor along the segment.
+vec4 linearSegment(float s_front, float s_back, float len) {
+    float unused;
+    return linearSegmentCued(s_front, s_back, len, 1.0, 1.0, unused);
 }
 
 #endif

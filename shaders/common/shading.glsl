@@ -112,6 +112,16 @@ uniform vec3 u_tone_light;   // towards the first light (world); 0: the headligh
 #if DEPTH_CUE
 #include "common/camera_ray.glsl"
 uniform vec3 u_depth_cue;    // nearest and farthest depth of the box, strength
+#ifndef DEPTH_CUE_ALONG_SEGMENT
+#define DEPTH_CUE_ALONG_SEGMENT 0
+#endif
+
+// The depth cue's colour factor at a point: 1 at the box's nearest depth, 1 - strength at
+// its farthest.
+float depthCue(vec3 p_world) {
+    float u = clamp((dot(p_world - u_eye, u_forward) - u_depth_cue.x) / (u_depth_cue.y - u_depth_cue.x), 0.0, 1.0);
+    return 1.0 - u_depth_cue.z * u;
+}
 #endif
 #if BOUNDARY
 uniform vec3 u_boundary;     // k_gc, k_gs, k_ge
@@ -154,9 +164,8 @@ void termsFor(vec3 g, vec3 p_world, vec3 ray_dir, out float factor, out vec3 off
                                                                 u_silhouette.z);
     }
 #endif
-#if DEPTH_CUE
-    float u = clamp((dot(p_world - u_eye, u_forward) - u_depth_cue.x) / (u_depth_cue.y - u_depth_cue.x), 0.0, 1.0);
-    float cue = 1.0 - u_depth_cue.z * u;
+#if DEPTH_CUE && !DEPTH_CUE_ALONG_SEGMENT    // (projected tetrahedra integrate it along the segment)
+    float cue = depthCue(p_world);
     factor *= cue;
     offset *= cue;
 #endif

@@ -32,6 +32,7 @@
 #include "common/camera_ray.glsl"
 #include "common/linear_segment.glsl"
 #if SAMPLE_TERMS
+#define DEPTH_CUE_ALONG_SEGMENT 1   // the cue varies along a segment: integrated with it
 #include "common/shading.glsl"
 #endif
 
@@ -102,8 +103,14 @@ void main() {
     float factor, scale;
     vec3 added;
     termsFor(v_field.xyz, origin, dir, factor, added, scale);
-    frag_color = linearSegment(s_front, s_back, (t_out - t_in) * scale);
-    frag_color.rgb = frag_color.rgb * factor + added * frag_color.a;
+    float q_front = 1.0, q_back = 1.0;
+    #if DEPTH_CUE      // linear in depth, so along the segment: C = integral c q tau T
+    q_front = depthCue(origin + t_in * dir);
+    q_back = depthCue(origin + t_out * dir);
+    #endif
+    float cued_alpha;
+    frag_color = linearSegmentCued(s_front, s_back, (t_out - t_in) * scale, q_front, q_back, cued_alpha);
+    frag_color.rgb = frag_color.rgb * factor + added * cued_alpha;
   #else
     frag_color = linearSegment(s_front, s_back, t_out - t_in);
   #endif
