@@ -653,8 +653,8 @@ class Scene:
                 raise ValueError("optical_model='sabella' colours a ray from its peak value alone; "
                                  "a TransferFunction2D needs the gradient too")
             if isinstance(volume, TetMesh):
-                raise ValueError("a TransferFunction2D classifies samples of a grid (a Volume); a TetMesh's "
-                                 "cells have one gradient each: give a 1D TransferFunction")
+                raise ValueError("a TransferFunction2D is rendered for grids (a Volume: raycast, slice3d, "
+                                 "slice2d); a TetMesh scene takes a 1D TransferFunction")
             if optical_model == "emission" and np.any(tf_2d.table[:, :, 3] >= 1):
                 raise ValueError("optical_model='emission' needs opacities below 1 (tau is infinite where "
                                  "alpha = 1), got alpha = 1 in the TransferFunction2D's table")

@@ -256,7 +256,7 @@ def test_a_2d_function_is_refused_where_it_is_not_defined():
         get_technique("raycast").make_plan(scene, preintegrate=True)
     points = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float)
     mesh = dvr_gl.TetMesh(points, np.array([[0, 1, 2, 3]]), np.array([0.0, 1.0, 2.0, 3.0]))
-    with pytest.raises(ValueError, match="a TetMesh's cells have one gradient each"):
+    with pytest.raises(ValueError, match="a TetMesh scene takes a 1D TransferFunction"):
         dvr_gl.Scene(mesh, TF2, dvr_gl.default_camera(mesh))
 
 
