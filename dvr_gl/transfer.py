@@ -68,6 +68,34 @@ class LookupTable:
         rows[1, :, 0] = self.transparency
         return rows
 
+    def step_table(self, length_over_unit):
+        """(n, 4) float32: each entry's segment for one full step of ``length_over_unit``
+        unit distances, premultiplied and opacity-corrected, ``(c alpha_L, alpha_L)`` with
+        ``alpha_L = 1 - (1 - alpha)^(L/u)`` (from the float32 entries, in float64). The
+        ray caster interpolates it for every full-length segment instead of correcting
+        each sample (GLSL ``lookupStepTF``); the difference is ``step_table_error``."""
+        from .reference.common import correct_opacity
+        a = self.table[:, 3].astype(np.float64)
+        corrected = correct_opacity(a, length_over_unit, self.transparency.astype(np.float64))
+        out = np.empty((self.size, 4))
+        out[:, :3] = self.table[:, :3].astype(np.float64) * corrected[:, None]
+        out[:, 3] = corrected
+        return out.astype(np.float32)
+
+    def step_table_error(self, length_over_unit, per_interval=64):
+        """Largest difference, over values between the entries, between interpolating
+        ``step_table`` and correcting the interpolated entry (what a sample gets either
+        way, float64): the price of the table, per segment."""
+        from .reference.common import correct_opacity
+        f = np.linspace(0.0, 1.0, per_interval + 1)[1:-1]
+        t = self.table.astype(np.float64)
+        w = self.transparency.astype(np.float64)
+        lerp = lambda rows: rows[:-1, None] * (1 - f[:, None]) + rows[1:, None] * f[:, None]   # noqa: E731
+        rgba = lerp(t)                                          # (n - 1, k, 4)
+        exact_a = correct_opacity(rgba[..., 3], length_over_unit, lerp(w[:, None])[..., 0])
+        exact = np.concatenate([rgba[..., :3] * exact_a[..., None], exact_a[..., None]], axis=-1)
+        return float(np.abs(lerp(self.step_table(length_over_unit).astype(np.float64)) - exact).max())
+
     def max_opacity_between(self, smin, smax):
         """Largest LUT opacity over each value interval [smin, smax] (arrays): the
         interpolated end points and every table entry strictly inside."""

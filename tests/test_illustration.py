@@ -240,12 +240,12 @@ def test_terms_are_refused_where_they_are_not_defined():
 def test_the_variants_compiled_and_the_textures_made_are_exactly_what_the_scenes_use():
     """A fresh renderer, four scenes in turn: each compiles the one variant its terms name
     and makes only the textures it reads (the gradient texture only for a lit scene that
-    asks for it; the volume, table and brick occupancy once)."""
+    asks for it; the volume, tables and brick occupancy once)."""
     from dvr_gl import Renderer
     camera = cameras(RAMP)["perspective"]
     base = dvr_gl.Scene(RAMP, TF, camera, width=16, height=16)
-    plain = {"MODE_COMPOSITE": 1, "SKIP_EMPTY": 1, "EARLY_RAY_TERMINATION": 1}
-    steps = [(base, {}, plain, {"volume", "tf", "occupancy", "target"}),
+    plain = {"MODE_COMPOSITE": 1, "SKIP_EMPTY": 1, "EARLY_RAY_TERMINATION": 1, "STEP_TABLE": 1}
+    steps = [(base, {}, plain, {"volume", "tf", "occupancy", "step_tf", "target"}),
              (base.replace(shading=True), {}, {**plain, "SAMPLE_TERMS": 1, "SHADING": 1}, set()),
              (base.replace(shading=True), {"gradients": "texture"},
               {**plain, "SAMPLE_TERMS": 1, "SHADING": 1, "GRADIENT_TEXTURE": 1}, {"gradient"}),

@@ -49,7 +49,8 @@ def derived_tolerance(plan):
     position n * tc carries ~4u * n of absolute error; times the largest difference
     between neighbouring samples) plus the trilinear arithmetic (~16u * max |s|). The
     table index carries 2u * (its range in entries); classification turns a value error
-    into a colour/opacity error of at most the table's steepest slope. Opacity correction
+    into a colour/opacity error of at most the table's steepest slope (the LUT's or the
+    step table's). Opacity correction
     and compositing add ~64u relative per segment (tested in test_shaders). Errors add at
     most linearly over the segments of the longest ray (transmittance weights <= 1).
     """
@@ -58,9 +59,15 @@ def derived_tolerance(plan):
     jump = max(float(np.abs(np.diff(vals, axis=a)).max()) for a in range(3))
     value_err = 4 * U32 * float(v.dims.max()) * jump + 16 * U32 * float(np.abs(vals).max())
     table = plan.lut.table.astype(np.float64)
+    if plan.step_rows is not None:      # full segments interpolate the step table: its slope too
+        table = np.concatenate([table, plan.step_rows.astype(np.float64)], axis=1)
     slope = float(np.abs(np.diff(table, axis=0)).max()) * plan.lut.scale  # per data unit
     index_err = 2 * U32 * plan.lut.size
     per_sample = slope * value_err + index_err * slope / plan.lut.scale + 64 * U32
+    if plan.step_rows is not None:
+        # a segment whose end falls within rounding of the ray's exit may be full in one
+        # arithmetic and partial in the other: the two ways differ by step_table_error
+        per_sample += 2 * plan.lut.step_table_error(plan.step / plan.scene.tf.unit_distance) / plan.max_segments
     if plan.scene.mode in ("mip", "minip", "average"):
         return per_sample * 4  # one classification of one (max / min / mean) value
     if plan.scene.mode == "isosurface":
@@ -283,16 +290,16 @@ def test_unlit_composite_scene_builds_only_what_it_uses():
     with dvr_gl.Renderer() as r:
         r.render(scene, skip_empty=False)
         kinds = sorted(k for k, _ in r.created)
-        assert kinds == ["target", "tf", "volume"]  # no gradient, jitter, mask or brick texture
+        assert kinds == ["step_tf", "target", "tf", "volume"]  # no gradient, jitter, mask or brick texture
         (vs, fs), = r.programs.sources.values()
         prog = next(iter(r.programs._programs.values()))
         # the compiled program has no lighting or jitter inputs: that code is not built
         assert not {"u_phong", "u_gradient_epsilon", "t_jitter", "t_occupancy", "t_cell_valid"} & set(prog)
         assert "#define MODE_COMPOSITE 1" in fs
         r.render(scene, skip_empty=True, jitter_seed=1)
-        assert sorted(k for k, _ in r.created) == ["jitter", "occupancy", "target", "tf", "volume"]
+        assert sorted(k for k, _ in r.created) == ["jitter", "occupancy", "step_tf", "target", "tf", "volume"]
         r.render(scene, skip_empty=True, jitter_seed=1)  # a second frame makes nothing new
-        assert len(r.created) == 5
+        assert len(r.created) == 6
         iso = scene.replace(mode="isosurface", iso_value=40.0)
         r.render(iso)
         iso_prog = [p for (v, f, d), p in r.programs._programs.items() if ("MODE_ISOSURFACE", 1) in d][0]
@@ -352,3 +359,24 @@ def test_gl_error_at_quarter_voxel_is_that_of_an_ideal_float64_marcher(renderer,
     gl = metrics.rmse(renderer.render(scene, step=step), exact)
     ideal = metrics.rmse(reference.render(scene, step=step, lut_exact=True, ert_transmittance=0.0), exact)
     assert gl <= 1.5 * ideal, (gl, ideal)
+
+
+@pytest.mark.parametrize("camera", ["perspective", "ortho", "eye_inside"])
+@pytest.mark.parametrize("jitter_seed", [None, 3])
+def test_step_table_is_the_per_sample_correction(renderer, camera, jitter_seed):
+    """Full-length segments read the step table instead of correcting each sample: the
+    image is the per-sample one up to the table's own difference (step_table_error per
+    segment) and the float32 bounds of both; the references agree to that difference."""
+    scene = dvr_gl.Scene(VOLUME, TF, cameras(VOLUME)[camera], width=40, height=32)
+    opts = dict(step=0.7, ert_transmittance=0.0, jitter_seed=jitter_seed)
+    table_plan = raycast.make_plan(scene, **opts)
+    plain_plan = raycast.make_plan(scene, step_table=False, **opts)
+    assert table_plan.step_rows is not None and plain_plan.step_rows is None
+    assert "STEP_TABLE" not in plain_plan.defines
+    difference = table_plan.max_segments * table_plan.lut.step_table_error(0.7 / TF.unit_distance)
+    with_table, without = renderer.render(scene, **opts), renderer.render(scene, step_table=False, **opts)
+    assert with_table[..., 3].max() > 0.1
+    assert metrics.max_abs_error(with_table, without) <= (difference + derived_tolerance(table_plan)
+                                                          + derived_tolerance(plain_plan))
+    assert metrics.max_abs_error(reference.render(scene, **opts),
+                                 reference.render(scene, step_table=False, **opts)) <= difference + 1e-12

@@ -87,6 +87,9 @@ def render_plan(plan, lut_exact=False):
     s_front = np.zeros(m)          # pre-integration: the field at each ray's segment start
     have_front = np.zeros(m, bool)
 
+    step_rows = None if lut_exact else plan.step_rows      # GLSL lookupStepTF
+    # the full segments, k = 0 .. n_full - 1 (the shader's count; the rest are partial)
+    n_full = np.maximum(np.floor((t1 - t0) / step - jitter), 0)
     for k in range(-1, plan.max_segments):
         a = np.maximum(t0 + (jitter + k) * step, t0)
         b = np.minimum(t0 + (jitter + k + 1) * step, t1)
@@ -102,6 +105,7 @@ def render_plan(plan, lut_exact=False):
         if rows.size == 0:
             continue
         a, b = a[rows], b[rows]
+        full = (k >= 0) & (k < n_full[rows])
         length = b - a
         tm = 0.5 * (a + b)
         if mode == "composite" and plan.preint is not None:
@@ -128,6 +132,11 @@ def render_plan(plan, lut_exact=False):
                 light = RayLighting(terms, o[rows], d[rows])
             piece = classified_segment(classify, transparency, s, length * inv_unit, scene.optical_model,
                                        None if light is None else (lambda *sample: light.samples(*sample, tm)))
+            if step_rows is not None and full.any():    # full segments: the step table
+                table = plan.lut._interpolate(step_rows, s[full])
+                if light is not None:
+                    table = RayLighting(terms, o[rows[full]], d[rows[full]]).segments(table, tm[full])
+                piece[full] = table
             transmittance = 1 - alpha_acc[rows]
             color[rows] += transmittance[:, None] * piece[:, :3]
             alpha_acc[rows] += transmittance * piece[:, 3]

@@ -12,14 +12,31 @@ uniform int u_tf_size;
 
 // Linear interpolation between table entries done here, in full float precision,
 // rather than by the texture unit's filter.
-vec4 lookupTFRow(float s, int row) {
+vec4 lerpTableRow(sampler2D table, float s, int row) {
     float u = clamp((s - u_tf_lo) * u_tf_scale, 0.0, float(u_tf_size - 1));
     int i0 = min(int(floor(u)), u_tf_size - 2);
     float f = u - float(i0);
-    vec4 a = texelFetch(t_tf, ivec2(i0, row), 0);
-    vec4 b = texelFetch(t_tf, ivec2(i0 + 1, row), 0);
+    vec4 a = texelFetch(table, ivec2(i0, row), 0);
+    vec4 b = texelFetch(table, ivec2(i0 + 1, row), 0);
     return a * (1.0 - f) + b * f;
 }
+
+vec4 lookupTFRow(float s, int row) {
+    return lerpTableRow(t_tf, s, row);
+}
+
+#ifndef STEP_TABLE
+#define STEP_TABLE 0
+#endif
+#if STEP_TABLE
+uniform sampler2D t_step_tf;   // (n, 1) RGBA32F: LookupTable.step_table for u_step, same entries
+// A full step's segment at value s, premultiplied and opacity-corrected (NumPy twin:
+// LookupTable.step_table, interpolated): what a sample of a full-length segment costs
+// instead of a lookup, a log and an exp.
+vec4 lookupStepTF(float s) {
+    return lerpTableRow(t_step_tf, s, 0);
+}
+#endif
 
 vec4 applyTF(float s) {
     return lookupTFRow(s, 0);

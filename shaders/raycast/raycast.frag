@@ -36,6 +36,9 @@
 #ifndef SAMPLE_TERMS
 #define SAMPLE_TERMS 0
 #endif
+#ifndef STEP_TABLE
+#define STEP_TABLE 0      // composite, emission-absorption, no pre-integration: see below
+#endif
 
 #include "common/camera_ray.glsl"
 #include "common/ray_box.glsl"
@@ -80,6 +83,25 @@ uniform float u_iso;
 
 out vec4 f_color;
 
+#if STEP_TABLE
+// A partial segment [a, b] of the ray (the first, jittered one or the last, shorter one),
+// its opacity corrected for its own length, composited front to back.
+void compositePartial(vec3 origin, vec3 dir, float a, float b, inout vec3 color, inout float alpha_acc) {
+    float len = b - a;
+    if (len <= 0.0) return;
+    vec3 p = origin + 0.5 * (a + b) * dir;
+  #if MASK_NONFINITE
+    if (!insideValidCell(p)) return;
+  #endif
+    float s = sampleVolume(p);
+    vec4 rgba = applyTF(s);
+    if (rgba.a <= 0.0) return;
+    vec4 piece = sampleSegmentOf(rgba, s, len * u_inv_unit, p, dir);
+    color += (1.0 - alpha_acc) * piece.rgb;
+    alpha_acc += (1.0 - alpha_acc) * piece.a;
+}
+#endif
+
 void main() {
     vec3 origin, dir;
     pixelRay(origin, dir);
@@ -120,6 +142,50 @@ void main() {
     float t_hit = -1.0;
 #endif
 
+#if STEP_TABLE
+    // Full segments k = 0 .. n_full - 1 span [t0 + (jitter + k) * step, t0 + (jitter + k +
+    // 1) * step] and read their corrected, premultiplied segment from the step table; the
+    // partial ones in front (a jittered start) and behind (the last, shorter one) are
+    // corrected for their own length once per ray, outside the loop: llvmpipe runs both
+    // sides of a branch that differs between pixels, so a per-sample choice would cost
+    // both ways for every sample.
+    int n_full = max(int(floor((t1 - t0) / u_step - jitter)), 0);
+    compositePartial(origin, dir, t0, min(t0 + jitter * u_step, t1), color, alpha_acc);
+    bool ended = false;
+    for (int k = 0; k < n_full && k < u_max_segments; ++k) {
+        vec3 p = origin + (t0 + (jitter + float(k) + 0.5) * u_step) * dir;
+  #if MASK_NONFINITE
+        if (!insideValidCell(p)) continue;
+  #endif
+        float s = sampleVolume(p);
+        vec4 piece = lookupStepTF(s);
+        if (piece.a <= 0.0) {
+  #if SKIP_EMPTY
+            vec3 idx = p / u_spacing;
+            ivec3 brick = clamp(ivec3(floor(idx / u_brick)), ivec3(0), textureSize(t_occupancy, 0) - 1);
+            if (texelFetch(t_occupancy, brick, 0).r < 0.5) {
+                vec3 lo = vec3(brick) * u_brick * u_spacing;
+                vec3 hi = lo + u_brick * u_spacing;
+                vec3 t_far = max((lo - origin) / dir, (hi - origin) / dir);
+                float t_exit = min(min(t_far.x, t_far.y), t_far.z);
+                int k_next = int(ceil((t_exit - t0) / u_step - jitter - 0.5)) - 1;
+                k = max(k, k_next - 1);
+            }
+  #endif
+            continue;
+        }
+        piece = litSegment(piece, p, dir);
+        color += (1.0 - alpha_acc) * piece.rgb;
+        alpha_acc += (1.0 - alpha_acc) * piece.a;
+  #if EARLY_RAY_TERMINATION
+        if (1.0 - alpha_acc < u_ert_transmittance) { ended = true; break; }
+  #endif
+        if (alpha_acc >= 1.0) { ended = true; break; }
+    }
+    if (!ended) {
+        compositePartial(origin, dir, max(t0 + (jitter + float(n_full)) * u_step, t0), t1, color, alpha_acc);
+    }
+#else
     // Segment k spans [t0 + (jitter + k) * step, t0 + (jitter + k + 1) * step] clipped to
     // [t0, t1]; k = -1 is the partial segment in front of a jittered start. Positions come
     // from k, never from accumulation, so skipping segments cannot move a sample.
@@ -216,6 +282,7 @@ void main() {
         t_prev = tm;
 #endif
     }
+#endif
 
 #if SABELLA
     if (!isinf(s_peak) && alpha_acc > 0.0) {
