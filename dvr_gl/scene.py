@@ -91,6 +91,17 @@ def _vector3(name, value, *, positive=False):
     return arr
 
 
+def interval(name, value):
+    """(low, high) from two finite numbers with low < high, or an error naming ``name``."""
+    try:
+        lo, hi = (float(v) for v in value)
+    except (TypeError, ValueError):
+        raise TypeError(f"{name} must be two numbers (low, high), got {value!r}") from None
+    if not (math.isfinite(lo) and math.isfinite(hi) and hi > lo):
+        raise ValueError(f"{name} must be two finite numbers with low < high, got {value!r}")
+    return lo, hi
+
+
 def _finite_number(name, value, *, positive=False):
     if isinstance(value, bool) or not isinstance(value, Real):
         raise TypeError(f"{name} must be a number, got {value!r}")
@@ -433,15 +444,7 @@ class TransferFunction2D:
         if not np.all(np.isfinite(arr)) or np.any(arr < 0) or np.any(arr > 1):
             bad = arr[~(np.isfinite(arr) & (arr >= 0) & (arr <= 1))][0].item()
             raise ValueError(f"table entries must lie in [0, 1], got {bad!r}")
-        ranges = []
-        for name, value in (("value_range", value_range), ("gradient_range", gradient_range)):
-            try:
-                lo, hi = (float(v) for v in value)
-            except (TypeError, ValueError):
-                raise TypeError(f"{name} must be two numbers (low, high), got {value!r}") from None
-            if not (math.isfinite(lo) and math.isfinite(hi) and hi > lo):
-                raise ValueError(f"{name} must be two finite numbers with low < high, got {value!r}")
-            ranges.append((lo, hi))
+        ranges = [interval("value_range", value_range), interval("gradient_range", gradient_range)]
         if ranges[1][0] < 0:
             raise ValueError(f"gradient_range must start at 0 or above (a magnitude), got {gradient_range!r}")
         arr.setflags(write=False)

@@ -242,8 +242,8 @@ def auto_preset_name(data):
     return "coolwarm ramp" if isinstance(data, TetMesh) else "warm ramp"
 
 
-def load_tf_json(path) -> TransferFunction:
-    """Read ``{"color": [[s, r, g, b], ...], "opacity": [[s, a], ...], "unit_distance": u}``."""
+def read_json_object(path):
+    """The JSON object a transfer function file holds, or a ValueError naming the file."""
     with open(path) as f:
         try:
             spec = json.load(f)
@@ -251,6 +251,12 @@ def load_tf_json(path) -> TransferFunction:
             raise ValueError(f"transfer function file {os.fspath(path)!r} is not valid JSON: {e}") from None
     if not isinstance(spec, dict):
         raise ValueError(f"transfer function file {os.fspath(path)!r} must hold a JSON object, got {type(spec).__name__}")
+    return spec
+
+
+def load_tf_json(path) -> TransferFunction:
+    """Read ``{"color": [[s, r, g, b], ...], "opacity": [[s, a], ...], "unit_distance": u}``."""
+    spec = read_json_object(path)
     missing = {"color", "opacity"} - spec.keys()
     if missing:
         raise ValueError(f"transfer function file {os.fspath(path)!r} lacks {sorted(missing)}")

@@ -12,13 +12,13 @@ colours weighted by opacity.
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from .scene import TransferFunction2D
+from .scene import TransferFunction2D, interval
+from .transfer import read_json_object
 
 RESOLUTION = (256, 64)   # (values, gradient magnitudes)
 
@@ -41,16 +41,6 @@ def _unit(name, value):
     return float(value)
 
 
-def _interval(name, value):
-    try:
-        lo, hi = (float(v) for v in value)
-    except (TypeError, ValueError):
-        raise TypeError(f"{name} must be two numbers (low, high), got {value!r}") from None
-    if not (math.isfinite(lo) and math.isfinite(hi) and hi > lo):
-        raise ValueError(f"{name} must be two finite numbers with low < high, got {value!r}")
-    return lo, hi
-
-
 @dataclass(frozen=True)
 class Rectangle:
     """Constant colour and opacity over ``value`` x ``gradient`` (both (low, high)); the
@@ -63,8 +53,8 @@ class Rectangle:
     ramp: float = 0.0
 
     def __post_init__(self):
-        object.__setattr__(self, "value", _interval("rectangle value", self.value))
-        object.__setattr__(self, "gradient", _interval("rectangle gradient", self.gradient))
+        object.__setattr__(self, "value", interval("rectangle value", self.value))
+        object.__setattr__(self, "gradient", interval("rectangle gradient", self.gradient))
         object.__setattr__(self, "color", _rgb("rectangle color", self.color))
         object.__setattr__(self, "opacity", _unit("rectangle opacity", self.opacity))
         ramp = _unit("rectangle ramp", self.ramp)
@@ -106,7 +96,7 @@ class Triangle:
         object.__setattr__(self, "color", _rgb("triangle color", self.color))
         object.__setattr__(self, "opacity", _unit("triangle opacity", self.opacity))
         if self.gradient is not None:
-            object.__setattr__(self, "gradient", _interval("triangle gradient", self.gradient))
+            object.__setattr__(self, "gradient", interval("triangle gradient", self.gradient))
 
     def opacity_at(self, s, g):
         s, g = np.broadcast_arrays(np.asarray(s, np.float64), np.asarray(g, np.float64))
@@ -130,8 +120,8 @@ def _grid(value_range, gradient_range, resolution):
         raise TypeError(f"resolution must be two integers (values, gradient magnitudes), got {resolution!r}") from None
     if n_v < 2 or n_g < 2 or n_v * n_g > 4096 * 4096:
         raise ValueError(f"resolution must be at least 2 x 2 and at most 4096 x 4096 entries, got {resolution!r}")
-    v = np.linspace(*_interval("value_range", value_range), n_v)
-    g = np.linspace(*_interval("gradient_range", gradient_range), n_g)
+    v = np.linspace(*interval("value_range", value_range), n_v)
+    g = np.linspace(*interval("gradient_range", gradient_range), n_g)
     return np.meshgrid(v, g)       # (n_g, n_v) each
 
 
@@ -182,7 +172,7 @@ def levoy_region_boundaries(materials, gradient_range, resolution=RESOLUTION, un
     values = np.array([r[0] for r in rows])
     if not np.all(np.isfinite(values)) or np.any(np.diff(values) <= 0):
         raise ValueError(f"material values must be finite and strictly increasing, got {values.tolist()}")
-    g_lo, g_hi = _interval("gradient_range", gradient_range)
+    g_lo, g_hi = interval("gradient_range", gradient_range)
     value_range = (values[0], values[-1])
     S, G = _grid(value_range, (g_lo, g_hi), resolution)
     alpha = np.interp(S, values, [r[2] for r in rows]) * (G / g_hi)
@@ -204,13 +194,7 @@ def load_tf2d_json(path, value_range=None, gradient_range=None):
     or ``"table"`` (n_gradient rows of n_value RGBA entries) instead of ``"widgets"``.
     ``value_range`` and ``gradient_range`` given here are the defaults for a file
     without them (the data's range and largest gradient magnitude)."""
-    with open(path) as f:
-        try:
-            spec = json.load(f)
-        except json.JSONDecodeError as e:
-            raise ValueError(f"{path}: not a JSON file ({e})") from None
-    if not isinstance(spec, dict):
-        raise ValueError(f"{path}: expected a JSON object with 'widgets' or 'table', got {type(spec).__name__}")
+    spec = read_json_object(path)
     unknown = sorted(set(spec) - {"value_range", "gradient_range", "unit_distance", "resolution", "widgets", "table"})
     if unknown:
         raise ValueError(f"{path}: unknown key {unknown[0]!r} (keys: value_range, gradient_range, unit_distance, "
@@ -251,7 +235,7 @@ def gradient_modulated(tf, gradient_range, floor=0.1, resolution=RESOLUTION):
     if len(knots) < 2:
         raise ValueError(f"tf needs control points at two values at least, got {knots.tolist()}")
     S, G = _grid((knots[0], knots[-1]), gradient_range, resolution)
-    g_hi = _interval("gradient_range", gradient_range)[1]
+    g_hi = interval("gradient_range", gradient_range)[1]
     alpha = tf.opacity(S) * (floor + (1 - floor) * G / g_hi)
     table = np.concatenate([tf.color(S), alpha[..., None]], axis=-1)
     return TransferFunction2D(table, (knots[0], knots[-1]), gradient_range, tf.unit_distance)
