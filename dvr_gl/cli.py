@@ -305,6 +305,7 @@ def cmd_render(args, out=None):
         image = renderer.render(scene, **render_kwargs)
         t3 = time.perf_counter()
         backend = _backend_name(renderer, args.backend)
+        choice = renderer.last_choice if "tolerance" in render_kwargs else None
     dvr_io.save_png(args.out, image, background=args.background)
 
     lo, hi = volume.data_range
@@ -317,8 +318,11 @@ def cmd_render(args, out=None):
         step = f"sort {render_kwargs.get('sort', 'mpvo')}"
     else:
         step = f"step {args.step:g}" if args.step is not None else "default step"
+    if choice is not None:
+        step = (f"step {choice.step:g} ({choice.step_voxels:.3g} voxel) for tolerance {choice.tolerance:g}, "
+                f"predicted RMSE {choice.predicted_rmse:.2g}")
     extras = [f"{k} {v}" if not isinstance(v, bool) else k for k, v in render_kwargs.items()
-              if k not in ("technique", "step", "sort")]
+              if k not in ("technique", "step", "sort", "tolerance")]
     step += "".join(", " + e for e in extras)
     if scene.is_mesh:
         name = getattr(volume, "scalars_name", None) or args.scalars or "?"

@@ -145,6 +145,9 @@ def add_render_options(r):
     r.add_argument("--step", type=_positive, metavar="S",
                    help="sampling step (slice distance for slice3d) in world units (default: half "
                         "the smallest spacing; slice2d takes none, see --interpolate; tetra none)")
+    r.add_argument("--tolerance", type=_positive, metavar="E",
+                   help="raycast: choose the step for an RMSE of at most E against the exact image "
+                        "(measured on a small pilot of the same view); not with --step")
     r.add_argument("--preintegrate", action="store_true",
                    help="pre-integrated classification of whole segments (composite mode)")
     r.add_argument("--interpolate", type=_count, metavar="K",
@@ -212,7 +215,7 @@ TECHNIQUE_OPTIONS = {"interpolate": ("slice2d",), "proxy": ("slice3d",), "shells
                      "preintegrate": ("raycast", "slice2d", "slice3d"), "sort": ("tetra",),
                      "repetitions": ("particles",), "seed": ("particles",), "radius": ("particles", "splat"),
                      "sampler": ("particles",), "density": ("splat",), "cutoff": ("splat",),
-                     "gradients": ("raycast", "slice2d", "slice3d")}
+                     "gradients": ("raycast", "slice2d", "slice3d"), "tolerance": ("raycast",)}
 
 #: the techniques that render meshes (cell projection); the others render grid volumes
 MESH_TECHNIQUES = ("tetra",)
@@ -240,8 +243,10 @@ def technique_options(args):
         args.technique = MESH_TECHNIQUES[0] if mesh else "raycast"
     _check_input_kind(args, mesh)
     kwargs = {"technique": args.technique}
-    for name in ("step", "preintegrate", "interpolate", "proxy", "shells", "sort", "repetitions", "seed",
-                 "radius", "sampler", "density", "cutoff", "gradients", "target"):
+    if getattr(args, "tolerance", None) is not None and args.step is not None:
+        raise UsageError("--tolerance", "chooses the step: leave out --step")
+    for name in ("step", "tolerance", "preintegrate", "interpolate", "proxy", "shells", "sort", "repetitions",
+                 "seed", "radius", "sampler", "density", "cutoff", "gradients", "target"):
         value = getattr(args, name, None)
         if value is None or value is False:
             continue

@@ -137,10 +137,15 @@ class Renderer:
             return dict(describe(self.ctx), backend=self.backend)
 
     # -- rendering --------------------------------------------------------------------
-    def render(self, scene, technique="raycast", step=None, **options):
+    def render(self, scene, technique="raycast", step=None, tolerance=None, **options):
         """Render ``scene``; see the technique's module for its options. Images larger
         than one GL target (``max_tile``) are rendered in tiles, each a window of the
-        same camera, into one array: the same pixels as a single render would give."""
+        same camera, into one array: the same pixels as a single render would give.
+
+        ``tolerance`` (ray casting): an RMSE against the exact image; the step is chosen
+        for it (``dvr_gl.tolerance``), and what was chosen is ``last_choice``."""
+        if tolerance is not None:
+            step = self._step_for_tolerance(scene, technique, step, tolerance, options)
         self._revive()
         with current(self.ctx):
             edge = self.max_tile
@@ -169,6 +174,29 @@ class Renderer:
                 progress.advance(f"{technique} {scene.width}x{scene.height} in tiles")
             progress.close()
             return image
+
+    last_choice = None      # the tolerance.Choice of the last render(tolerance=...)
+
+    def _step_for_tolerance(self, scene, technique, step, tolerance, options):
+        from . import tolerance as tol
+        if technique != "raycast":
+            raise ValueError(f"tolerance chooses the ray caster's step; technique {technique!r} takes its "
+                             f"own options (use technique='raycast')")
+        if step is not None:
+            raise ValueError(f"give tolerance or step, not both (got step={step!r}, tolerance={tolerance!r})")
+        check_options(technique, options)
+        tolerance = tol.check_tolerance(tolerance)
+        key = (scene.digest(), scene.camera.key(), repr(sorted(options.items())))
+        models = self.__dict__.setdefault("_error_models", {})
+        model = models.get(key)
+        if model is None:
+            opts = dict(options, ert_transmittance=0.0)     # the pilot measures the step's error alone
+            model = tol.measure(lambda s, h: self.render(s, technique, step=h, **opts), scene)
+            if len(models) > 64:
+                models.clear()
+            models[key] = model
+        self.last_choice = tol.choose_step(model, scene, tolerance)
+        return self.last_choice.step
 
     @property
     def max_tile(self):

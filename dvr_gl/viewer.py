@@ -1449,6 +1449,9 @@ def settings_from_args(args) -> Settings:
     options = dict(technique_options(args))    # checks that each option fits the technique
     options.pop("technique", None)
     options.pop("step", None)
+    if options.pop("tolerance", None) is not None:
+        raise UsageError("--tolerance", "is for dvr-gl render and Renderer.render; the viewer's step is "
+                                        "its own (keys - and =, coarse frames while the camera moves)")
     # unlike render, isosurface mode needs no --iso: the viewer picks one (keys , and . move it)
     mode = args.mode or ("isosurface" if args.iso is not None else "composite")
     if args.iso is not None and mode != "isosurface":

@@ -130,6 +130,8 @@ BAD = [
     (["--shading", "--mode", "mip"], "--shading", "not --mode mip"),
     (["--no-shading", "--gradients", "texture"], "--gradients", "only used with --shading"),
     (["--illustration", "halo"], "argument --illustration", "'halo'"),
+    (["--tolerance", "1e-3", "--step", "1"], "--tolerance", "leave out --step"),
+    (["--tolerance", "1e-3", "--technique", "slice3d"], "--tolerance", "raycast only, not slice3d"),
     (["--illustration", "tone", "--mode", "mip"], "--illustration", "not --mode mip"),
     (["--illustration", "boundary", "--preintegrate"], "--illustration", "leave out --preintegrate"),
     (["--gradients", "sobel"], "argument --gradients", "'sobel'"),
@@ -697,6 +699,20 @@ def test_shading_bench_quick_run(tmp_path, capsys):
     assert float(rows["raycast lit"]["rmse"]) < 1e-2
     convergence = json.load(open(tmp_path / "shading.json"))["info"]["convergence"]
     assert np.mean(convergence["raycast_orders"]) > 1.7
+
+
+def test_render_with_a_tolerance_says_the_step_it_chose(renderer, tiny, capsys):
+    d, _ = tiny
+    vol = load_volume(d / "tiny.npy")
+    out = d / "tol.png"
+    code, stdout, err = _run(["render", d / "tiny.npy", "--size", "32x32", "--tolerance", "1e-3", "--out", out],
+                             capsys)
+    assert code == 0, err
+    assert "for tolerance 0.001, predicted RMSE" in stdout
+    with dvr_gl.Renderer() as r:
+        scene = dvr_gl.Scene(vol, auto_preset(vol), first_camera(vol), 32, 32, shading=True)
+        expected = r.render(scene, tolerance=1e-3)
+    assert np.array_equal(_png(out)[1], to_png_array(expected))
 
 
 def test_render_optical_models(renderer, tiny, capsys):

@@ -1,0 +1,83 @@
+"""Error targets (``Renderer.render(..., tolerance=E)``): the chosen step's image is within
+E of the exact image on scenes of different kinds, no more than twice as fine as the best
+step of a fixed ladder that meets E (frame time goes as 1 / step), the pilot is reused,
+and bad requests are refused."""
+
+import numpy as np
+import pytest
+
+import dvr_gl
+from dvr_gl import data as bundled
+from dvr_gl import metrics, reference
+from dvr_gl.phantoms import marschner_lobb, marschner_lobb_tf
+from dvr_gl.tolerance import MAX_STEP, SAFETY, error_model
+
+from test_shading import RAMP, TF, cameras
+
+LADDER = [2.0 / 2 ** k for k in range(8)]     # 2 .. 1/64 voxel
+
+
+def scenes():
+    ml = marschner_lobb(41)
+    head = bundled.ct_head()
+    return {
+        "marschner_lobb": dvr_gl.Scene(ml, marschner_lobb_tf(), dvr_gl.default_camera(ml, azimuth=30, elevation=20),
+                                       48, 48),
+        "ct_head": dvr_gl.Scene(head, bundled.ct_head_tf(), dvr_gl.default_camera(head, azimuth=30, elevation=15),
+                                48, 40),
+        "ramp_lit": dvr_gl.Scene(RAMP, TF, cameras(RAMP)["perspective"], 40, 32, shading=True),
+    }
+
+
+@pytest.mark.parametrize("name", ["marschner_lobb", "ct_head", "ramp_lit"])
+@pytest.mark.parametrize("tolerance", [1e-2, 1e-3])
+def test_the_chosen_step_meets_the_tolerance_and_is_not_needlessly_fine(renderer, name, tolerance):
+    scene = scenes()[name]
+    exact = reference.exact(scene)
+    image = renderer.render(scene, tolerance=tolerance)
+    choice = renderer.last_choice
+    assert metrics.rmse(image, exact) <= tolerance, (choice, metrics.rmse(image, exact))
+    voxel = scene.volume.min_spacing
+    meets = [k for k in LADDER if metrics.rmse(renderer.render(scene, step=k * voxel), exact) <= tolerance]
+    assert meets, "some step of the ladder meets the tolerance"
+    assert choice.step_voxels >= 0.5 * max(meets), (choice, max(meets))
+
+
+def test_the_pilot_is_reused_and_the_choice_is_readable(renderer):
+    scene = scenes()["marschner_lobb"]
+    renderer.render(scene, tolerance=2e-3)
+    first = renderer.last_choice
+    renderer.render(scene, tolerance=2e-3)
+    assert renderer.last_choice == first        # the same model and choice
+    assert first.tolerance == 2e-3 and first.predicted_rmse <= SAFETY * 2e-3 * (1 + 1e-12)
+    assert first.step == pytest.approx(first.step_voxels * scene.volume.min_spacing)
+    assert max(first.pilot_size) <= 64 and 1.0 <= first.order <= 3.0
+    renderer.render(scene, tolerance=2e-4)
+    finer = renderer.last_choice
+    assert finer.step < first.step and finer.pilot_seconds == first.pilot_seconds   # the pilot reused
+
+
+def test_an_empty_image_takes_the_largest_step(renderer):
+    volume = dvr_gl.Volume(np.zeros((8, 8, 8), np.float32))
+    tf = dvr_gl.TransferFunction([(0, 1, 1, 1), (1, 1, 1, 1)], [(0, 0.0), (1, 0.5)])
+    renderer.render(dvr_gl.Scene(volume, tf, dvr_gl.default_camera(volume), 16, 16), tolerance=1e-3)
+    assert renderer.last_choice.step_voxels == MAX_STEP
+
+
+def test_error_model_reads_the_order_off_the_differences():
+    p, err = error_model(4e-3, 1e-3)          # second order: each halving quarters the difference
+    assert p == pytest.approx(2.0) and err == pytest.approx(1e-3 / 3)
+    assert error_model(1e-3, 2e-3)[0] == 1.0  # not converging yet: the safe, first order
+    assert error_model(1e-3, 0.0) == (2.0, 0.0)
+
+
+def test_bad_requests_are_refused(renderer):
+    scene = scenes()["ramp_lit"]
+    with pytest.raises(ValueError, match="give tolerance or step, not both"):
+        renderer.render(scene, step=0.5, tolerance=1e-3)
+    with pytest.raises(ValueError, match="tolerance chooses the ray caster's step"):
+        renderer.render(scene, technique="slice3d", tolerance=1e-3)
+    with pytest.raises(ValueError, match="tolerance must be a positive RMSE, got -1"):
+        renderer.render(scene, tolerance=-1)
+    with pytest.raises(TypeError, match="tolerance must be a number"):
+        renderer.render(scene, tolerance=True)
