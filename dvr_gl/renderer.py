@@ -14,6 +14,7 @@ from .gl.programs import ProgramCache
 from .progress import Progress
 from .cache import LRU, IdentityKey as _Key, TableCache
 from .techniques import check_options, get_technique
+from .techniques.common import preintegration_applies
 
 
 class Renderer:
@@ -145,7 +146,8 @@ class Renderer:
         ``tolerance`` (ray casting): an RMSE against the exact image; the step is chosen
         for it (``dvr_gl.tolerance``), and what was chosen is ``last_choice``."""
         if tolerance is not None:
-            step = self._step_for_tolerance(scene, technique, step, tolerance, options)
+            step, preintegrate = self._step_for_tolerance(scene, technique, step, tolerance, options)
+            options = dict(options, preintegrate=preintegrate)
         self._revive()
         with current(self.ctx):
             edge = self.max_tile
@@ -186,17 +188,25 @@ class Renderer:
             raise ValueError(f"give tolerance or step, not both (got step={step!r}, tolerance={tolerance!r})")
         check_options(technique, options)
         tolerance = tol.check_tolerance(tolerance)
-        key = (scene.digest(), scene.camera.key(), repr(sorted(options.items())))
         models = self.__dict__.setdefault("_error_models", {})
-        model = models.get(key)
-        if model is None:
-            opts = dict(options, ert_transmittance=0.0)     # the pilot measures the step's error alone
-            model = tol.measure(lambda s, h: self.render(s, technique, step=h, **opts), scene)
-            if len(models) > 64:
-                models.clear()
-            models[key] = model
-        self.last_choice = tol.choose_step(model, scene, tolerance)
-        return self.last_choice.step
+
+        def choice(preintegrate):
+            key = (scene.digest(), scene.camera.key(), repr(sorted(options.items())), preintegrate)
+            model = models.get(key)
+            if model is None:
+                # the pilot measures the step's error alone
+                opts = dict(options, ert_transmittance=0.0, preintegrate=preintegrate)
+                model = tol.measure(lambda s, h: self.render(s, technique, step=h, **opts), scene)
+                if len(models) > 64:
+                    models.clear()
+                models[key] = model
+            return tol.choose_step(model, scene, tolerance, preintegrate)
+
+        if "preintegrate" in options:
+            self.last_choice = choice(bool(options["preintegrate"]))
+        else:
+            self.last_choice = tol.cheaper(choice(False), choice(True) if preintegration_applies(scene) else None)
+        return self.last_choice.step, self.last_choice.preintegrate
 
     @property
     def max_tile(self):

@@ -81,3 +81,22 @@ def test_bad_requests_are_refused(renderer):
         renderer.render(scene, tolerance=-1)
     with pytest.raises(TypeError, match="tolerance must be a number"):
         renderer.render(scene, tolerance=True)
+
+
+def test_a_narrow_tf_feature_is_pre_integrated(renderer):
+    """An opacity spike 1 % of the range wide: plain steps would have to be very short,
+    pre-integrated ones need not; the cheaper choice meets the tolerance."""
+    head = bundled.ct_head()
+    lo, hi = head.data_range
+    centre, width = lo + 0.55 * (hi - lo), 0.01 * (hi - lo)
+    tf = dvr_gl.TransferFunction(color=[(lo, 0.9, 0.6, 0.4), (centre, 1.0, 0.95, 0.8), (hi, 0.6, 0.7, 1.0)],
+                                 opacity=[(lo, 0.0), (centre - width / 2, 0.0), (centre, 0.9),
+                                          (centre + width / 2, 0.0), (hi, 0.0)], unit_distance=head.min_spacing)
+    scene = dvr_gl.Scene(head, tf, dvr_gl.default_camera(head, azimuth=30, elevation=15), 48, 40)
+    image = renderer.render(scene, tolerance=2e-2)
+    choice = renderer.last_choice
+    assert choice.preintegrate
+    assert metrics.rmse(image, reference.exact(scene)) <= 2e-2
+    renderer.render(scene, tolerance=2e-2, preintegrate=False)      # the caller's say is kept
+    plain = renderer.last_choice
+    assert not plain.preintegrate and plain.step_voxels * 2.5 < choice.step_voxels

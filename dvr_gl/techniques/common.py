@@ -107,6 +107,13 @@ def tf_uniforms(lut, tf):
             "u_inv_unit": 1.0 / tf.unit_distance}
 
 
+def preintegration_applies(scene):
+    """Whether the scene's segments can be pre-integrated (``preintegration_table``
+    says why not where they cannot)."""
+    return (scene.mode == "composite" and scene.optical_model == "emission_absorption" and scene.tf_2d is None
+            and not {"boundary", "silhouette"} & set(scene.illustration))
+
+
 def preintegration_table(scene, step, tables):
     """The scene's pre-integrated table for segments ``step`` long (built once per TF,
     value range and step)."""
