@@ -15,6 +15,7 @@ import numpy as np
 import dvr_gl
 from dvr_gl import metrics, reference
 from dvr_gl.inputs import first_camera, load_input, resolve_tf, shading_for
+from dvr_gl.io import atomic_write
 from dvr_gl.progress import Progress
 from dvr_gl.tolerance import PILOT_STEPS, SAFETY
 
@@ -74,10 +75,7 @@ def main(argv=None):
     lines += ["", f"Achieved <= requested in {met} of {len(rows)}; at most {worst:.2f}x the best fixed "
                   "step's frame time."]
     text = "\n".join(lines) + "\n"
-    tmp = args.out + ".tmp"
-    with open(tmp, "w") as fh:
-        fh.write(text)
-    os.replace(tmp, args.out)
+    atomic_write(args.out, text.encode())
     print(text)
 
 

@@ -16,6 +16,7 @@ import dvr_gl
 from dvr_gl import metrics, reference
 from dvr_gl.bench import datasets, interleaved_frames, oblique_camera
 from dvr_gl.phantoms import marschner_lobb, marschner_lobb_tf
+from dvr_gl.io import atomic_write
 from dvr_gl.progress import Progress
 from dvr_gl.vtk_peer import VTKPeer
 
@@ -93,10 +94,7 @@ def main(argv=None):
     lines += ["", f"dvr_gl's error at or below VTK's in {met} of {len(rows)}; time / VTK from "
                   f"{min(ratios):.2f} to {max(ratios):.2f} (median {np.median(ratios):.2f})."]
     text = "\n".join(lines) + "\n"
-    tmp = args.out + ".tmp"
-    with open(tmp, "w") as fh:
-        fh.write(text)
-    os.replace(tmp, args.out)
+    atomic_write(args.out, text.encode())
     print(text)
 
 

@@ -191,7 +191,8 @@ class Renderer:
         models = self.__dict__.setdefault("_error_models", {})
 
         def choice(preintegrate):
-            key = (scene.digest(), scene.camera.key(), repr(sorted(options.items())), preintegrate)
+            # the model depends on the pilot alone: images of one view at any size share it
+            key = (tol.pilot_scene(scene).digest(), repr(sorted(options.items())), preintegrate)
             model = models.get(key)
             if model is None:
                 # the pilot measures the step's error alone
