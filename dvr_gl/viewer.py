@@ -98,7 +98,8 @@ dvr-gl view: keys and mouse
   p                    pre-integration on / off (techniques that offer it)
   c                    cell order mpvo / centroid (tetra, for meshes)
   - / =                coarser / finer step (slice2d: fewer / more interpolated slices;
-                       tetra: none, each cell is integrated exactly)
+                       tetra: none, each cell is integrated exactly; raycast with
+                       --tolerance: twice / half the tolerance)
   1..9                 transfer function: 1 the one given, then the presets
   [ / ]                opacity scale down / up
   e                    show / hide the transfer-function editor
@@ -465,6 +466,7 @@ class Settings:
     optical_model: str = "emission_absorption"   # composite's optical model (key x cycles it)
     illustration: tuple = ()             # Ebert-Rheingans terms by name (key i cycles them)
     lights: tuple | None = None          # dvr_gl.Light objects; None: the headlight
+    tolerance: float | None = None       # raycast: full frames at the step for this RMSE
 
 
 @dataclass
@@ -511,6 +513,7 @@ class Viewer:
         self.illustration = tuple(settings.illustration)
         self.lights = settings.lights
         self.step = settings.step          # None: the technique's default
+        self.tolerance = settings.tolerance  # raycast: an RMSE the full frames are rendered to
         self.options = dict(settings.options)  # technique options: command line, then keys
         self.technique = settings.technique
         self.backgrounds = []
@@ -729,7 +732,13 @@ class Viewer:
         options = self._options()
         if self._accumulates():
             options["repetitions"] = 1 if coarse else self.accumulated
-        return self._scene(width, height), self.technique, step, options
+        scene = self._scene(width, height)
+        if self.tolerance is not None and self.technique == "raycast" and not coarse:
+            # progressive: coarse frames while the view moves, then the step (and
+            # pre-integration) the error model picks for the tolerance, once it is still
+            step, preintegrate = self.renderer._step_for_tolerance(scene, "raycast", None, self.tolerance, options)
+            options["preintegrate"] = preintegrate
+        return scene, self.technique, step, options
 
     def _accumulates(self):
         """Whether the technique averages independent sets (particles) and the user left
@@ -1056,6 +1065,11 @@ class Viewer:
 
     def change_step(self, coarser):
         factor = math.sqrt(2.0)
+        if self.tolerance is not None and self.technique == "raycast":
+            self.tolerance *= 2.0 if coarser else 0.5
+            self._changed()
+            self.say(f"tolerance {self.tolerance:.3g}")
+            return
         if self.info.accepts_step:
             step = self.effective_step()
             new = step * factor if coarser else step / factor
@@ -1233,6 +1247,8 @@ class Viewer:
     def _update_title(self):
         f = self.last_frame
         step = f"step {f.step:.3g}" if f.step is not None else "fixed sampling"
+        if self.tolerance is not None and self.technique == "raycast":
+            step = f"tolerance {self.tolerance:.3g}, {step}"
         if "interpolate" in self._options():
             step += f", interpolate {self._options()['interpolate']}"
         extras = [k for k in ("preintegrate",) if self._options().get(k)]
@@ -1449,9 +1465,7 @@ def settings_from_args(args) -> Settings:
     options = dict(technique_options(args))    # checks that each option fits the technique
     options.pop("technique", None)
     options.pop("step", None)
-    if options.pop("tolerance", None) is not None:
-        raise UsageError("--tolerance", "is for dvr-gl render and Renderer.render; the viewer's step is "
-                                        "its own (keys - and =, coarse frames while the camera moves)")
+    tolerance = options.pop("tolerance", None)
     # unlike render, isosurface mode needs no --iso: the viewer picks one (keys , and . move it)
     mode = args.mode or ("isosurface" if args.iso is not None else "composite")
     if args.iso is not None and mode != "isosurface":
@@ -1473,7 +1487,7 @@ def settings_from_args(args) -> Settings:
                     options=options, shading=getattr(args, "shading", None),
                     lights=tuple(args.light) if getattr(args, "light", None) else None,
                     optical_model=getattr(args, "optical_model", None) or "emission_absorption",
-                    illustration=tuple(getattr(args, "illustration", None) or ()))
+                    illustration=tuple(getattr(args, "illustration", None) or ()), tolerance=tolerance)
 
 
 def open_viewer(argv) -> Viewer:

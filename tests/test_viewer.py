@@ -1073,3 +1073,25 @@ def test_mesh_file_through_the_command_line(open_viewer, tmp_path):
     v.refine()
     press(v, "s")
     assert png(tmp_path / "shot.png")[..., 3].max() > 100
+
+
+def test_tolerance_refines_to_the_chosen_step_and_keys_change_it(open_viewer, renderer, tmp_path):
+    """--tolerance: coarse frames while the view moves, then the full frame at the step
+    the error model picks (the headless render with that tolerance is the same image);
+    - and = double and halve the tolerance."""
+    v = head_viewer(open_viewer, "--tolerance", "2e-3", "--screenshot", str(tmp_path / "tol.png"))
+    v.refine()
+    assert v.last_frame.quality == "full"
+    scene, name, step, options = v.render_arguments()
+    headless = renderer.render(scene, name, tolerance=2e-3)
+    assert step == pytest.approx(renderer.last_choice.step) and options["preintegrate"] == \
+        renderer.last_choice.preintegrate
+    press(v, "s")
+    assert np.abs(png(tmp_path / "tol.png").astype(int)
+                  - dvr_io.to_png_array(headless, v.settings.background).astype(int)).max() <= 1
+    press(v, "=")
+    assert v.tolerance == pytest.approx(1e-3) and v.messages[-1] == "tolerance 0.001"
+    assert v.render_arguments()[2] < step
+    press(v, "-")
+    press(v, "-")
+    assert v.tolerance == pytest.approx(4e-3) and v.render_arguments()[2] > step
