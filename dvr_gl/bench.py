@@ -56,6 +56,9 @@ RENDERERS = (  # (label, kind, skip_empty)
     ("dvr_gl raycast+skip", "dvr_gl", True),
     ("VTK GPU raycast", "vtk", None),
 )
+# with VTK: dvr_gl asked for VTK's RMSE at each of VTK's steps (Renderer.render's
+# tolerance=, skipping on), timed in the same round robin
+TOLERANCE_LABEL = "dvr_gl tolerance=VTK's RMSE"
 
 
 # -- data sets -------------------------------------------------------------------------
@@ -190,7 +193,7 @@ def _row(dataset, scene, label, kind, skip, step_vox, step_world, times, err):
         "ms_median": 1e3 * statistics.median(times), "ms_min": 1e3 * min(times),
         "ms_max": 1e3 * max(times), "frames_ms": [1e3 * t for t in times],
         "rmse": err["rmse"], "max_abs": err["max_abs"], "psnr": err["psnr"],
-        "time_vs_vtk": None, "rmse_vs_vtk": None,
+        "time_vs_vtk": None, "rmse_vs_vtk": None, "chosen_step_voxels": None, "chosen_preintegrate": None,
     }
 
 
@@ -228,6 +231,8 @@ def run(args, err=None):
     sets = _load_datasets(names, args.chest, err)
 
     renderers = [r for r in RENDERERS if r[1] != "vtk" or peer is not None]
+    if peer is not None:
+        renderers.append((TOLERANCE_LABEL, "dvr_gl", True))
     frames = 1 + args.repeats  # one warm-up frame, then the timed ones
     progress = Progress(len(sets) * (1 + len(steps) * len(renderers) * frames), stream=err)
     rows = []
@@ -246,10 +251,16 @@ def run(args, err=None):
                 for step_vox in steps:
                     step = step_vox * volume.min_spacing
                     calls = []
+                    vtk_rmse = None
+                    if peer is not None:
+                        peer.setup(scene, step)  # the peer serves this scene only, here
+                        vtk_rmse = metrics.compare(peer.frame(), exact)["rmse"]
                     for label, kind, skip in renderers:
                         if kind == "vtk":
-                            peer.setup(scene, step)  # the peer serves this scene only, here
                             calls.append(peer.frame)
+                        elif label == TOLERANCE_LABEL:
+                            calls.append(functools.partial(gl.render, scene, technique="raycast",
+                                                           tolerance=max(vtk_rmse, 1e-12)))
                         else:
                             calls.append(functools.partial(gl.render, scene, technique="raycast",
                                                            step=step, skip_empty=skip))
@@ -259,8 +270,12 @@ def run(args, err=None):
                             f"{name} step {step_vox:g}: {renderers[k][0]} "
                             + ("warm-up" if i < 0 else f"frame {i + 1}/{args.repeats}")))
                     for (label, kind, skip), image, ts in zip(renderers, images, times):
-                        rows.append(_row(name, scene, label, kind, skip, step_vox, step, ts,
-                                         metrics.compare(image, exact)))
+                        row = _row(name, scene, label, kind, skip, step_vox, step, ts, metrics.compare(image, exact))
+                        if label == TOLERANCE_LABEL:   # its own step, chosen for VTK's RMSE at this one
+                            gl.render(scene, tolerance=max(vtk_rmse, 1e-12))
+                            row["chosen_step_voxels"] = gl.last_choice.step_voxels
+                            row["chosen_preintegrate"] = gl.last_choice.preintegrate
+                        rows.append(row)
     finally:
         progress.close()
         if peer is not None:
@@ -467,7 +482,10 @@ def format_table(rows):
     head = ("data", "step", "renderer", "ms/frame", "min ms", "RMSE", "max err", "PSNR dB", "t/VTK", "err/VTK")
     lines = []
     for r in rows:
-        lines.append((r["dataset"], f"{r['step_voxels']:g}", r["renderer"], _fmt(r["ms_median"], ".1f"),
+        label = r["renderer"]
+        if r.get("chosen_step_voxels") is not None:     # the step the tolerance chose
+            label += f" (step {r['chosen_step_voxels']:.2g}" + (", pre" if r.get("chosen_preintegrate") else "") + ")"
+        lines.append((r["dataset"], f"{r['step_voxels']:g}", label, _fmt(r["ms_median"], ".1f"),
                       _fmt(r["ms_min"], ".1f"),
                       _fmt(r["rmse"], ".2e"), _fmt(r["max_abs"], ".3f"), _fmt(r["psnr"], ".1f"),
                       _fmt(r["time_vs_vtk"], ".2f"), _fmt(r["rmse_vs_vtk"], ".2f")))
@@ -489,7 +507,7 @@ def format_table(rows):
 
 CSV_FIELDS = ("dataset", "width", "height", "renderer", "kind", "skip_empty", "step_voxels",
               "step_world", "ms_median", "ms_min", "ms_max", "rmse", "max_abs", "psnr",
-              "time_vs_vtk", "rmse_vs_vtk")
+              "time_vs_vtk", "rmse_vs_vtk", "chosen_step_voxels", "chosen_preintegrate")
 
 
 def output_paths(out):
@@ -537,7 +555,7 @@ def figure_png(rows, info) -> bytes:
     fig = Figure(figsize=(5.5 * len(names), 4.5), constrained_layout=True)
     axes = fig.subplots(1, len(names), squeeze=False)[0]
     styles = {"dvr_gl raycast": ("tab:blue", "o"), "dvr_gl raycast+skip": ("tab:green", "s"),
-              "VTK GPU raycast": ("tab:red", "^")}
+              "VTK GPU raycast": ("tab:red", "^"), TOLERANCE_LABEL: ("tab:purple", "D")}
     for ax, name in zip(axes, names):
         for label in dict.fromkeys(r.get("series", r["renderer"]) for r in rows):
             pts = sorted(((r["ms_median"], r["rmse"], r["step_voxels"]) for r in rows
