@@ -64,6 +64,7 @@ class Renderer:
         self._vbos = {}
         self._vaos = {}
         self.tables = TableCache()
+        self._error_models = LRU(64)   # tolerance: pilot view and options -> tolerance.ErrorModel
         self._resources = {}  # kind -> LRU: what techniques keep on the GPU (see resource)
         self._idle_fbo = idle_framebuffer(self.ctx)  # bound before any target is released
 
@@ -146,7 +147,9 @@ class Renderer:
         ``tolerance`` (ray casting): an RMSE against the exact image; the step is chosen
         for it (``dvr_gl.tolerance``), and what was chosen is ``last_choice``."""
         if tolerance is not None:
-            step, preintegrate = self._step_for_tolerance(scene, technique, step, tolerance, options)
+            if step is not None:
+                raise ValueError(f"give tolerance or step, not both (got step={step!r}, tolerance={tolerance!r})")
+            step, preintegrate = self.tolerance_settings(scene, tolerance, technique, **options)
             options = dict(options, preintegrate=preintegrate)
         self._revive()
         with current(self.ctx):
@@ -179,28 +182,24 @@ class Renderer:
 
     last_choice = None      # the tolerance.Choice of the last render(tolerance=...)
 
-    def _step_for_tolerance(self, scene, technique, step, tolerance, options):
+    def tolerance_settings(self, scene, tolerance, technique="raycast", **options):
+        """(step, preintegrate) for an RMSE of ``tolerance`` against the exact image
+        (``dvr_gl.tolerance``; also ``last_choice``): the error model of the scene's
+        pilot view is measured once and kept."""
         from . import tolerance as tol
         if technique != "raycast":
             raise ValueError(f"tolerance chooses the ray caster's step; technique {technique!r} takes its "
                              f"own options (use technique='raycast')")
-        if step is not None:
-            raise ValueError(f"give tolerance or step, not both (got step={step!r}, tolerance={tolerance!r})")
         check_options(technique, options)
         tolerance = tol.check_tolerance(tolerance)
-        models = self.__dict__.setdefault("_error_models", {})
 
         def choice(preintegrate):
             # the model depends on the pilot alone: images of one view at any size share it
             key = (tol.pilot_scene(scene).digest(), repr(sorted(options.items())), preintegrate)
-            model = models.get(key)
-            if model is None:
-                # the pilot measures the step's error alone
-                opts = dict(options, ert_transmittance=0.0, preintegrate=preintegrate)
-                model = tol.measure(lambda s, h: self.render(s, technique, step=h, **opts), scene)
-                if len(models) > 64:
-                    models.clear()
-                models[key] = model
+            # the pilot measures the step's error alone
+            opts = dict(options, ert_transmittance=0.0, preintegrate=preintegrate)
+            model = self._error_models.get(key, lambda: tol.measure(
+                lambda s, h: self.render(s, technique, step=h, **opts), scene))
             return tol.choose_step(model, scene, tolerance, preintegrate)
 
         if "preintegrate" in options:

@@ -45,8 +45,9 @@ class LookupTable:
         self.table = table.astype(np.float32)
         self.transparency = (1.0 - table[:, 3]).astype(np.float32)
 
-    def _interpolate(self, rows, s):
-        """Twin of GLSL ``lookupTFRow``: linear between entries, float64 arithmetic."""
+    def interpolate(self, rows, s):
+        """Twin of GLSL ``lerpTableRow``: rows (this table's, or one of the same entries such
+        as ``step_table``) linear between entries at values ``s``, float64 arithmetic."""
         u = np.clip((np.asarray(s, dtype=np.float64) - self.lo) * self.scale, 0.0, self.size - 1)
         i0 = np.minimum(np.floor(u).astype(np.int64), self.size - 2)
         f = (u - i0).reshape(u.shape + (1,) * (rows.ndim - 1))
@@ -55,11 +56,11 @@ class LookupTable:
 
     def lookup(self, s):
         """RGBA at data values ``s`` (float64 arithmetic on the float32 table)."""
-        return self._interpolate(self.table, s)
+        return self.interpolate(self.table, s)
 
     def lookup_transparency(self, s):
         """1 - alpha at data values ``s``, from the transparency row."""
-        return self._interpolate(self.transparency, s)
+        return self.interpolate(self.transparency, s)
 
     def texture_rows(self):
         """(2, n, 4) float32: row 0 RGBA, row 1 transparency in its first channel."""

@@ -736,7 +736,7 @@ class Viewer:
         if self.tolerance is not None and self.technique == "raycast" and not coarse:
             # progressive: coarse frames while the view moves, then the step (and
             # pre-integration) the error model picks for the tolerance, once it is still
-            step, preintegrate = self.renderer._step_for_tolerance(scene, "raycast", None, self.tolerance, options)
+            step, preintegrate = self.renderer.tolerance_settings(scene, self.tolerance, "raycast", **options)
             options["preintegrate"] = preintegrate
         return scene, self.technique, step, options
 

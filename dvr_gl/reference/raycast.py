@@ -133,7 +133,7 @@ def render_plan(plan, lut_exact=False):
             piece = classified_segment(classify, transparency, s, length * inv_unit, scene.optical_model,
                                        None if light is None else (lambda *sample: light.samples(*sample, tm)))
             if step_rows is not None and full.any():    # full segments: the step table
-                table = plan.lut._interpolate(step_rows, s[full])
+                table = plan.lut.interpolate(step_rows, s[full])
                 if light is not None:
                     table = RayLighting(terms, o[rows[full]], d[rows[full]]).segments(table, tm[full])
                 piece[full] = table

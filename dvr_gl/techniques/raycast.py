@@ -72,7 +72,7 @@ from ..scene import Scene
 from ..transfer import LookupTable
 from .common import (cleared_target, add_optional_inputs, bind, box_proxy, camera_uniforms, check_flag, check_scene,
                      grow_pixels, shading_defines,
-                     check_step, check_target, preintegration_table, tf_uniforms, volume_uniforms)
+                     check_step, check_target, preintegration_applies, preintegration_table, tf_uniforms, volume_uniforms)
 
 BRICK = 8            # brick edge in cells, for empty-space skipping
 JITTER_TABLE = 64    # jitter table edge in pixels
@@ -166,11 +166,11 @@ def make_plan(scene, step=None, *, target="rgba32f", jitter_seed=None, ert_trans
 
 
 def uses_step_table(scene, preint):
-    """Whether full-length segments can read the step table: plain emission-absorption
-    composite samples, classified by the 1D TF, whose length no term scales (colour terms,
-    lighting included, apply to the premultiplied segment as ``litSegment`` does)."""
-    return (scene.mode == "composite" and preint is None and scene.optical_model == "emission_absorption"
-            and scene.tf_2d is None and not {"boundary", "silhouette"} & set(scene.illustration))
+    """Whether full-length segments can read the step table: where a pre-integrated table
+    could stand (emission-absorption composite samples of the 1D TF whose length no term
+    scales; colour terms, lighting included, apply to the premultiplied segment as
+    ``litSegment`` does), when none is used."""
+    return preint is None and preintegration_applies(scene)
 
 
 @functools.lru_cache(maxsize=8)

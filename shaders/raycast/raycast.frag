@@ -83,6 +83,24 @@ uniform float u_iso;
 
 out vec4 f_color;
 
+#if SKIP_EMPTY
+// A sample at p (segment k) came out fully transparent: if its brick is empty, every
+// midpoint inside it has zero opacity, so return the segment before the one whose
+// midpoint first passes the brick's exit (rounding can only make the ray look once more,
+// never skip a sample); else k.
+int skipEmptyBrick(vec3 p, vec3 origin, vec3 dir, float t0, float jitter, int k) {
+    vec3 idx = p / u_spacing;
+    ivec3 brick = clamp(ivec3(floor(idx / u_brick)), ivec3(0), textureSize(t_occupancy, 0) - 1);
+    if (texelFetch(t_occupancy, brick, 0).r >= 0.5) return k;
+    vec3 lo = vec3(brick) * u_brick * u_spacing;
+    vec3 hi = lo + u_brick * u_spacing;
+    vec3 t_far = max((lo - origin) / dir, (hi - origin) / dir);
+    float t_exit = min(min(t_far.x, t_far.y), t_far.z);
+    int k_next = int(ceil((t_exit - t0) / u_step - jitter - 0.5)) - 1;
+    return max(k, k_next - 1);
+}
+#endif
+
 #if STEP_TABLE
 // A partial segment [a, b] of the ray (the first, jittered one or the last, shorter one),
 // its opacity corrected for its own length, composited front to back.
@@ -161,16 +179,7 @@ void main() {
         vec4 piece = lookupStepTF(s);
         if (piece.a <= 0.0) {
   #if SKIP_EMPTY
-            vec3 idx = p / u_spacing;
-            ivec3 brick = clamp(ivec3(floor(idx / u_brick)), ivec3(0), textureSize(t_occupancy, 0) - 1);
-            if (texelFetch(t_occupancy, brick, 0).r < 0.5) {
-                vec3 lo = vec3(brick) * u_brick * u_spacing;
-                vec3 hi = lo + u_brick * u_spacing;
-                vec3 t_far = max((lo - origin) / dir, (hi - origin) / dir);
-                float t_exit = min(min(t_far.x, t_far.y), t_far.z);
-                int k_next = int(ceil((t_exit - t0) / u_step - jitter - 0.5)) - 1;
-                k = max(k, k_next - 1);
-            }
+            k = skipEmptyBrick(p, origin, dir, t0, jitter, k);
   #endif
             continue;
         }
@@ -234,19 +243,7 @@ void main() {
             // Nothing to composite. Only now look at the brick: occupied regions never
             // pay for the lookup, and an empty brick is crossed in one jump.
   #if SKIP_EMPTY
-            vec3 idx = p / u_spacing;
-            ivec3 brick = clamp(ivec3(floor(idx / u_brick)), ivec3(0), textureSize(t_occupancy, 0) - 1);
-            if (texelFetch(t_occupancy, brick, 0).r < 0.5) {
-                // Every midpoint inside this brick has zero opacity. Jump to the segment
-                // before the one whose midpoint first passes the brick's exit, so rounding
-                // can only make us look once more, never skip a sample.
-                vec3 lo = vec3(brick) * u_brick * u_spacing;
-                vec3 hi = lo + u_brick * u_spacing;
-                vec3 t_far = max((lo - origin) / dir, (hi - origin) / dir);
-                float t_exit = min(min(t_far.x, t_far.y), t_far.z);
-                int k_next = int(ceil((t_exit - t0) / u_step - jitter - 0.5)) - 1;
-                k = max(k, k_next - 1);
-            }
+            k = skipEmptyBrick(p, origin, dir, t0, jitter, k);
   #endif
             continue;
         }
