@@ -3,10 +3,13 @@
 
     python apps/first_pictures.py [DATA_DIR] [--out docs/first_pictures.png]
 
-DATA_DIR defaults to $DVR_GL_DATA or the ``shared/data`` folder beside the checkout. The
-headerless ``.raw.gz`` and the PLOT3D ``.bin`` files are left out (they need their shape
-and type given); so are a mesh's ``.npz`` twin and a raw file's header, which would only
-repeat a picture. Prints each file's exit status and time.
+DATA_DIR defaults to $DVR_GL_DATA or the ``shared/data`` folder beside the checkout.
+Headerless raw files are shown where their name carries shape and type in the Open SciVis
+convention (``LIDC2_256x256x133_uint8.raw.gz``: ``dvr-gl render`` opens it with no
+option); other headerless ``.raw.gz`` and the PLOT3D ``.bin`` files are left out (they
+need their shape and type given), and so is a MetaImage's or a sliced NRRD's data. No
+option is given, ``--orientation`` included: files without an anatomical orientation
+keep the oblique view of their own axes. Prints each file's exit status and time.
 """
 
 from __future__ import annotations
@@ -21,6 +24,7 @@ from PIL import Image, ImageDraw
 
 from dvr_gl import cli
 from dvr_gl.bench import DEFAULT_DATA_DIR
+from dvr_gl.io import raw_name_layout
 
 SKIP_SUFFIXES = (".raw.gz", ".bin", ".json", ".md")
 
@@ -35,8 +39,8 @@ def data_files(root):
         names = sorted(os.listdir(path))
         for name in names:
             lower = name.lower()
-            if lower.endswith(SKIP_SUFFIXES) or lower.startswith("readme"):
-                continue
+            if (lower.endswith(SKIP_SUFFIXES) and raw_name_layout(name) is None) or lower.startswith("readme"):
+                continue      # a name_XxYxZ_dtype.raw.gz opens with no option: it stays
             if lower.startswith("quarter.") and not lower.endswith(".nhdr"):
                 continue      # the slices of quarter.nhdr
             if lower.endswith(".raw") and os.path.splitext(name)[0] + ".mhd" in names:

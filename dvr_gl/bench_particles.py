@@ -13,8 +13,9 @@ Per data set:
   read-back; particles are made once per TF, so a new view costs only this), median of
   ``--repeats`` frames after one warm-up, each frame from a new view;
 - the same frame time and error for the data set's other technique (raycast at a
-  half-voxel step; tetra with MPVO), and on grids for splatting (density 1 and 2, default
-  kernel) and VTK's GPU ray caster at a one-voxel step (the bar splatting is held to).
+  half-voxel step; tetra with MPVO), and on grids for splatting (density 1 and 2, the
+  default tent kernel: sheets a voxel and half a voxel apart) and VTK's GPU ray caster at a
+  one-voxel step (the bar splatting is held to).
 """
 
 from __future__ import annotations

@@ -45,6 +45,15 @@ class LRU:
             _release(old)
         return value
 
+    def put(self, key, value):
+        """Keep ``value`` under ``key``, replacing what was there (not released: the
+        caller's new value may be built on it)."""
+        self.items[key] = value
+        self.items.move_to_end(key)
+        while len(self.items) > self.capacity:
+            _, old = self.items.popitem(last=False)
+            _release(old)
+
     def release(self):
         for value in self.items.values():
             _release(value)

@@ -27,8 +27,8 @@ import time
 from . import io as dvr_io
 from .inputs import PRESETS  # presets and bundled data sets are shared with the viewer and dvr_gl.render
 from .options import (MESH_TECHNIQUES, OPTION_OF_FIELD, UsageError, _check_input_options, _origin, _shape,
-                      _spacing, add_render_options, check_png, check_technique, input_is_mesh, load_input_args,
-                      resolve_tf_option, technique_options)
+                      _spacing, add_orientation_option, add_render_options, check_png, check_technique,
+                      input_is_mesh, load_input_args, resolve_tf_option, technique_options)
 
 PROG = "dvr-gl"
 
@@ -56,6 +56,7 @@ def build_parser(bench_module=None):
     info_raw.add_argument("--spacing", type=_spacing, metavar="SX,SY,SZ", help="sample spacing")
     info_raw.add_argument("--origin", type=_origin, metavar="OX,OY,OZ", help="world position of the first sample")
     info_raw.add_argument("--mask-nonfinite", action="store_true", help="allow NaN and inf samples")
+    add_orientation_option(info_raw)
 
     r = sub.add_parser(
         "render", help="render a volume to a PNG",
@@ -172,6 +173,22 @@ def cmd_info_file(args, out=None):
         print("bounds     " + ", ".join(f"{axis} {a:g}..{b:g}" for axis, a, b in zip("xyz", lo, hi)), file=out)
         print(f"range      {data.data_range[0]:g}..{data.data_range[1]:g}"
               + (" (non-finite samples masked)" if data.has_nonfinite else ""), file=out)
+        if data.orientation is not None:
+            given = getattr(args, "orientation", None)
+            note = ""
+            if getattr(data, "orientation_assumed", False):
+                note = ("; assumed: the file names no anatomy, this is its format's convention "
+                        "(MetaImage: ITK's LPS; NRRD 3D-right/left-handed: LPS/LPI); --orientation CODE says otherwise")
+            elif given is not None:
+                note = "; given by --orientation" if given == data.orientation else \
+                    f"; --orientation {given} is a left-handed frame: loaded with x reversed, so no view is a mirror image"
+            print(f"orientation {data.orientation} (x, y, z point {', '.join(_ANATOMY[c] for c in data.orientation)}"
+                  f"{note})", file=out)
+        else:
+            print("orientation none in the file (the first view looks along -z with +y up; "
+                  "--orientation CODE such as RAS says where the axes point)", file=out)
+        if data.modality is not None:
+            print(f"modality   {data.modality}", file=out)
     values = data.scalars if mesh else data.data
     print("histogram  " + text_histogram(values) + f"  ({data.data_range[0]:g} to {data.data_range[1]:g}, "
           "32 bins, height ~ log count)", file=out)
@@ -179,6 +196,9 @@ def cmd_info_file(args, out=None):
     name = preset if preset != "auto" else f"auto: {auto_preset_name(data)}"
     print(f"preset     {_describe_tf(name, PRESETS[preset](data))} (what render uses without --tf)", file=out)
     return 0
+
+
+_ANATOMY = {"R": "right", "L": "left", "A": "anterior", "P": "posterior", "S": "superior", "I": "inferior"}
 
 
 def text_histogram(values, bins=32):
@@ -333,6 +353,9 @@ def cmd_render(args, out=None):
         sx, sy, sz = (float(v) for v in volume.spacing)
         print(f"volume     {args.input}: {nx}x{ny}x{nz} (x, y, z) {volume.data.dtype}, spacing {sx:g},{sy:g},{sz:g}, "
               f"values {lo:g}..{hi:g}", file=out)
+    if tf_name == "auto":
+        from .transfer import auto_preset_name
+        tf_name = f"auto: {auto_preset_name(volume)}"
     print(f"transfer   {_describe_tf(tf_name, tf)}", file=out)
     print(f"rendered   {args.technique}, mode {mode}" + (f" {args.iso:g}" if mode == "isosurface" else "")
           + (", lit" if scene.shading else "")

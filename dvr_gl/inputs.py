@@ -34,6 +34,9 @@ PRESETS = {
     "ct": lambda data: _transfer().ct_preset(data, "ct"),
     "ct_bone": lambda data: _transfer().ct_preset(data, "ct_bone"),
     "ct_lung": lambda data: _transfer().ct_preset(data, "ct_lung"),
+    "ct_8bit": lambda data: _transfer().ct_8bit_preset(data, "ct_8bit"),
+    "ct_bone_8bit": lambda data: _transfer().ct_8bit_preset(data, "ct_bone_8bit"),
+    "ct_lung_8bit": lambda data: _transfer().ct_8bit_preset(data, "ct_lung_8bit"),
     "mr": lambda data: _transfer().mr_preset(data),
     "warm": lambda data: _transfer().ramp_preset(data, _transfer().RAMPS["warm"]),
     "coolwarm": lambda data: _transfer().ramp_preset(data, _transfer().RAMPS["coolwarm"]),
@@ -53,12 +56,17 @@ BUILTINS = {
 
 def suitable_presets(data):
     """The preset names that suit ``data``: auto first, the CT ones for Hounsfield units,
-    mr for an anatomically oriented volume, then the generic ramps and colormaps."""
+    their 8-bit forms for 8-bit data that may be CT (modality CT or not known), mr for an
+    MRI (modality MR, or an anatomically oriented volume), then the generic ramps and
+    colormaps."""
     transfer = _transfer()
     names = ["auto"]
+    modality = getattr(data, "modality", None)
     if transfer.looks_like_hu(data):
         names += ["ct", "ct_bone", "ct_lung"]
-    if getattr(data, "orientation", None) is not None:
+    elif transfer.is_8bit(data) and modality in (None, "CT"):
+        names += list(transfer.CT_8BIT_WINDOWS)
+    if modality == "MR" or transfer.is_oriented_scan(data):
         names.append("mr")
     names += ["warm", "coolwarm", "grey"]
     import importlib.util
@@ -79,18 +87,31 @@ def is_mesh_input(source, shape=None, dtype=None):
     return dvr_io.is_mesh_file(path)
 
 
-def load_input(source, *, scalars=None, shape=None, dtype=None, spacing=None, origin=None, mask_nonfinite=False):
+def load_input(source, *, scalars=None, shape=None, dtype=None, spacing=None, origin=None, mask_nonfinite=False,
+               orientation=None):
     """(data, default preset name) for ``source``: a file (a volume, or a mesh as
     ``dvr_gl.io.is_mesh_file`` tells), ``"builtin:NAME"`` (a bundled data set), a 3-D
     array (nz, ny, nx), or a ``Volume`` / ``TetMesh`` (returned as it is). ``spacing``
     and ``origin`` apply to arrays and bundled data too; ``shape`` and ``dtype`` are for
-    raw files."""
+    raw files. ``orientation`` (three letters such as ``"RAS"``: where the x, y and z
+    axes point anatomically) replaces or supplies a volume's; a mesh takes none."""
     from .scene import TetMesh, Volume
-    if isinstance(source, (Volume, TetMesh)):
+    if orientation is not None:
+        orientation = dvr_io.parse_orientation(orientation)
+        if isinstance(source, TetMesh) or is_mesh_input(source, shape, dtype):
+            raise InputError("orientation", "is for grid volumes (anatomical scans), not meshes")
+    if isinstance(source, Volume):
+        if orientation is None or orientation == source.orientation:
+            return source, "auto"
+        data, orientation = dvr_io.right_handed(source.data, orientation)     # no mirror image
+        return Volume(data, spacing=source.spacing, origin=source.origin, mask_nonfinite=source.mask_nonfinite,
+                      orientation=orientation, modality=source.modality), "auto"
+    if isinstance(source, TetMesh):
         return source, "auto"
     if isinstance(source, np.ndarray):
-        return Volume(source, spacing=spacing or (1.0, 1.0, 1.0), origin=origin or (0.0, 0.0, 0.0),
-                      mask_nonfinite=mask_nonfinite), "auto"
+        data, orientation = dvr_io.right_handed(source, orientation)
+        return Volume(data, spacing=spacing or (1.0, 1.0, 1.0), origin=origin or (0.0, 0.0, 0.0),
+                      mask_nonfinite=mask_nonfinite, orientation=orientation), "auto"
     try:
         path = os.fspath(source)
     except TypeError:
@@ -106,13 +127,15 @@ def load_input(source, *, scalars=None, shape=None, dtype=None, spacing=None, or
                 raise InputError(field, f"is for raw files, not the bundled {path}")
         loader, preset = BUILTINS[name]
         volume = loader()
-        if spacing is not None or origin is not None:
-            volume = Volume(volume.data, spacing=spacing or volume.spacing, origin=origin or volume.origin)
+        if spacing is not None or origin is not None or orientation is not None:
+            data, orientation = dvr_io.right_handed(volume.data, orientation or volume.orientation)
+            volume = Volume(data, spacing=spacing or volume.spacing, origin=origin or volume.origin,
+                            orientation=orientation, modality=volume.modality)
         return volume, preset
     if is_mesh_input(path, shape, dtype):
         return dvr_io.load_mesh(path, scalars=scalars), "auto"
     return dvr_io.load_volume(path, shape=shape, dtype=dtype, spacing=spacing, origin=origin,
-                              mask_nonfinite=mask_nonfinite), "auto"
+                              mask_nonfinite=mask_nonfinite, orientation=orientation), "auto"
 
 
 def _is_tf2d_file(path):
@@ -143,6 +166,10 @@ def resolve_tf(spec, data, default="auto"):
             return key, PRESETS[key](data)
         if key.startswith("cmap:"):
             return key, _transfer().colormap_preset(data, str(spec)[5:])
+        kind, colon, window = key.partition(":")
+        if colon and kind in _transfer().CT_8BIT_WINDOWS:     # ct_8bit:LO,HI, the window in HU
+            window = str(spec).partition(":")[2]               # as given: "-" is a minus sign here
+            return f"{kind}:{window}", _transfer().ct_8bit_preset(data, kind, _transfer().parse_hu_window(window))
     except ValueError as e:
         raise InputError("tf", str(e)) from None
     if os.path.isfile(spec):
@@ -159,7 +186,7 @@ def resolve_tf(spec, data, default="auto"):
     if str(spec).lower().endswith(".json"):
         raise InputError("tf", f"no such file {spec!r}")
     raise InputError("tf", f"{spec!r} is neither a preset ({', '.join(PRESETS)}, cmap:NAME for any matplotlib "
-                           f"colormap) nor a file")
+                           f"colormap, ct_8bit:LO,HI for 8-bit CT windowed from LO to HI HU) nor a file")
 
 
 #: the first view's turn (degrees), as pyvista's default view is oblique: azimuth about
@@ -215,9 +242,10 @@ _RENDERERS = {}
 
 def render(source, *, tf=None, technique=None, size=(512, 512), azimuth=None, elevation=None, zoom=1.0, fov=30.0,
            ortho=False, mode="composite", iso=None, shading=None, lights=None, scalars=None, spacing=None,
-           backend="auto", **options):
+           orientation=None, backend="auto", **options):
     """Render ``source`` (anything :func:`load_input` takes) in one call; returns the
-    (height, width, 4) float32 premultiplied RGBA image, row 0 on top.
+    (height, width, 4) float32 premultiplied RGBA image, row 0 on top, as a
+    :class:`dvr_gl.notebook.RenderedImage` (an ndarray that Jupyter shows as a picture).
 
     >>> image = dvr_gl.render("ct.nrrd", azimuth=30, elevation=20)          # doctest: +SKIP
     >>> image = dvr_gl.render(np.random.rand(32, 32, 32), tf="auto")          # doctest: +SKIP
@@ -226,13 +254,14 @@ def render(source, *, tf=None, technique=None, size=(512, 512), azimuth=None, el
     preset). ``technique``: as ``Renderer.render`` (default: raycast for grids, tetra
     for meshes); its own options (``step``, ``sort``, ``repetitions``, ...) pass through
     ``options``. The camera is :func:`first_camera` (an oblique view, in front of the
-    face for an anatomically oriented volume). Composite samples are lit where the
+    face for an anatomically oriented volume; ``orientation="LPS"`` and the like says
+    where a scan's axes point when its file does not). Composite samples are lit where the
     technique lights them (:func:`shading_for`) unless ``shading=False``; ``lights``: a
     ``dvr_gl.Light`` or a list of them (the headlight by default). One renderer per
     backend is kept for the process, so later calls do not compile or upload again."""
     from .renderer import Renderer
     from .scene import Scene
-    data, preset = load_input(source, scalars=scalars, spacing=spacing)
+    data, preset = load_input(source, scalars=scalars, spacing=spacing, orientation=orientation)
     _, tf = resolve_tf(tf, data, preset)
     try:
         width, height = (int(size), int(size)) if np.isscalar(size) else (int(size[0]), int(size[1]))
@@ -253,4 +282,5 @@ def render(source, *, tf=None, technique=None, size=(512, 512), azimuth=None, el
     renderer = _RENDERERS.get(backend)
     if renderer is None:
         renderer = _RENDERERS[backend] = Renderer(backend=backend)
-    return renderer.render(scene, technique=technique, **options)
+    from .notebook import RenderedImage      # shows itself in Jupyter; a plain array otherwise
+    return RenderedImage(renderer.render(scene, technique=technique, **options))

@@ -11,7 +11,11 @@
   ``space directions`` (the length of each axis vector) or ``spacings``, the origin from
   ``space origin``. The volume is axis-aligned: a direction matrix that is not a positive
   diagonal is not applied (a warning says so), as in VTK's image data without a direction.
-- ``.mhd`` / ``.mha`` -- MetaImage (header plus raw, zlib or local data).
+- ``.mhd`` / ``.mha`` -- MetaImage (header plus raw, zlib or local data). The orientation
+  comes from ``TransformMatrix`` (direction cosines in ITK's LPS patient axes) where it is
+  not the identity, else from ``AnatomicalOrientation`` (written in ITK's "from" letters:
+  ``RAI`` is the identity in LPS, read as ``LPS``); ``Modality`` (``MET_MOD_CT``, ...)
+  becomes the volume's ``modality`` (``CT``, ...).
 - ``.nii`` / ``.nii.gz`` -- NIfTI-1/2 through nibabel (``pip install "dvr-gl[io]"``; a
   missing nibabel is an error that says so). The samples as the file's x, y, z index axes
   (scaled by its slope and intercept), spacing from the voxel sizes, origin from the
@@ -30,6 +34,12 @@
   ``.slc`` -- through VTK's own readers (``pip install "dvr-gl[io]"``): the point
   scalars (or the first point array), spacing and origin from the file.
 - any other extension is an error listing the formats above.
+
+The volume's ``orientation`` (where the index axes point anatomically, e.g. ``RAS``) comes
+from NIfTI, NRRD, MetaImage and DICOM; ``orientation``, when given, replaces or supplies it
+(files such as a NRRD in ``3D-left-handed`` space or a MetaImage without orientation fields
+have none). ``modality`` comes from DICOM's Modality, MetaImage's ``Modality`` and a NRRD
+``modality:=`` key/value pair.
 
 ``spacing`` and ``origin``, when given, replace what the file says. ``shape`` and
 ``dtype`` describe raw files; for self-describing files they are checks. Samples are
@@ -60,7 +70,8 @@ IBlank are passed over; the first one-component array if all are flags). Points 
 is a mesh rather than a volume; :func:`point_arrays` lists a mesh file's point arrays.
 
 :func:`save_png` writes a premultiplied float RGBA image (conventions section 7)
-atomically; :func:`parse_size` and :func:`parse_triplet` parse command-line values.
+atomically; :func:`parse_size`, :func:`parse_triplet` and :func:`parse_orientation` parse
+command-line values.
 """
 
 from __future__ import annotations
@@ -80,7 +91,7 @@ import numpy as np
 from .scene import MAX_IMAGE_SIDE, TetMesh, Volume
 
 __all__ = ["InputError", "MissingFileError", "load_volume", "load_mesh", "is_mesh_file", "point_arrays",
-           "save_png", "to_png_array", "parse_size", "parse_triplet", "RAW_DTYPES"]
+           "save_png", "to_png_array", "parse_size", "parse_triplet", "parse_orientation", "RAW_DTYPES"]
 
 #: dtypes accepted for raw files (any byte order); the Volume holds uint8, uint16, int16,
 #: float32 and float64, the others are widened as the module docstring says.
@@ -148,6 +159,37 @@ def parse_triplet(text, name="value", kind=float, positive=False):
     return _triplet(text, name, kind=kind, positive=positive)
 
 
+def parse_orientation(codes, name="orientation"):
+    """``"ras"`` -> ``"RAS"``: three letters naming where the x, y and z index axes point,
+    one each of R/L, A/P and S/I (nibabel's axis codes); errors name ``name``."""
+    from .scene import _orientation
+    try:
+        return _orientation(codes.strip() if isinstance(codes, str) else codes)
+    except ValueError:
+        raise InputError(name, f"expected three letters, one each of R/L, A/P and S/I, naming where the x, y "
+                               f"and z axes point (such as RAS or LPI), got {codes!r}") from None
+
+
+_AXIS_VECTORS = {"R": (1, 0, 0), "L": (-1, 0, 0), "A": (0, 1, 0), "P": (0, -1, 0), "S": (0, 0, 1), "I": (0, 0, -1)}
+
+
+def right_handed(data, orientation):
+    """``(data, orientation)`` drawn without a mirror image.
+
+    The renderer places index axes x, y, z along world x, y, z, a right-handed frame.
+    Where the anatomical directions of the index axes form a left-handed frame (``LPI``,
+    ``RAI``, ``LAS`` -- the radiological storage of many NIfTI files -- ...), no view
+    of that placement shows the patient the right way round: left and right come out
+    swapped. Such data is returned with its x axis reversed and its letter swapped
+    (``LPI`` -> ``RPI``), as nibabel's ``as_closest_canonical`` reorients; the box and
+    spacing stay. Right-handed or unknown orientations are returned as they are."""
+    if orientation is None:
+        return data, orientation
+    if np.linalg.det(np.array([_AXIS_VECTORS[c] for c in orientation], float)) > 0:
+        return data, orientation
+    return np.ascontiguousarray(np.asarray(data)[:, :, ::-1]), _OPPOSITE[orientation[0]] + orientation[1:]
+
+
 def parse_size(text, name="size"):
     """``"640x480"`` -> ``(640, 480)`` (width, height); ``"512"`` means 512x512."""
     s = str(text).strip().lower().replace("\u00d7", "x")
@@ -207,17 +249,23 @@ def _named_errors(read):
     return guarded
 
 
-def load_volume(path, shape=None, dtype=None, spacing=None, origin=None, mask_nonfinite=False) -> Volume:
-    """Read a volume file (see the module docstring for formats); returns a Volume."""
+def load_volume(path, shape=None, dtype=None, spacing=None, origin=None, mask_nonfinite=False,
+                orientation=None) -> Volume:
+    """Read a volume file (see the module docstring for formats); returns a Volume.
+    ``orientation`` (three letters such as ``"RAS"``, see :func:`parse_orientation`)
+    replaces the file's anatomical orientation, or supplies one where it has none."""
+    if orientation is not None:
+        orientation = parse_orientation(orientation)
     if _is_dicom_path(path):
-        data, file_spacing, file_origin, orientation = _load_dicom_series(os.fspath(path))
+        data, file_spacing, file_origin, file_orientation, modality = _load_dicom_series(os.fspath(path))
         if shape is not None and tuple(data.shape) != _triplet(shape, "shape", kind=int, positive=True):
             raise InputError("shape", f"{os.fspath(path)!r} holds shape {tuple(data.shape)} (nz, ny, nx), "
                                       f"not the {shape} given")
+        data, orientation = right_handed(data, orientation or file_orientation)
         return Volume(_volume_dtype(data, os.fspath(path)),
                       spacing=file_spacing if spacing is None else _triplet(spacing, "spacing", positive=True),
                       origin=file_origin if origin is None else _triplet(origin, "origin"),
-                      mask_nonfinite=mask_nonfinite, orientation=orientation)
+                      mask_nonfinite=mask_nonfinite, orientation=orientation, modality=modality)
     path = _existing_file(path, "volume")
     if spacing is not None:
         spacing = _triplet(spacing, "spacing", positive=True)
@@ -229,16 +277,16 @@ def load_volume(path, shape=None, dtype=None, spacing=None, origin=None, mask_no
         dtype = _parse_dtype(dtype)
 
     lower = path.lower()
-    orientation = None   # anatomical, where the file says (NIfTI, NRRD)
+    file_orientation = modality = None   # anatomical orientation and modality, where the file says
     if lower.endswith((".npy", ".npz", ".nrrd", ".nhdr", ".mhd", ".mha")):
         if lower.endswith(".npy"):
             data, file_spacing, file_origin = _load_npy(path), None, None
         elif lower.endswith(".npz"):
             data, file_spacing, file_origin = _load_npz(path)
         elif lower.endswith((".nrrd", ".nhdr")):
-            data, file_spacing, file_origin, orientation = _load_nrrd(path)
+            data, file_spacing, file_origin, file_orientation, modality = _load_nrrd(path)
         else:
-            data, file_spacing, file_origin = _load_metaimage(path)
+            data, file_spacing, file_origin, file_orientation, modality = _load_metaimage(path)
         if data.ndim != 3:
             raise InputError("path", f"{path!r} holds a {data.ndim}-D array of shape {data.shape}; "
                                       "a volume is 3-D (nz, ny, nx)")
@@ -250,7 +298,7 @@ def load_volume(path, shape=None, dtype=None, spacing=None, origin=None, mask_no
         spacing = spacing if spacing is not None else (file_spacing or (1.0, 1.0, 1.0))
         origin = origin if origin is not None else (file_origin or (0.0, 0.0, 0.0))
     elif lower.endswith((".nii", ".nii.gz")):
-        data, file_spacing, file_origin, orientation = _load_nifti(path)
+        data, file_spacing, file_origin, file_orientation = _load_nifti(path)
         if shape is not None and tuple(data.shape) != shape:
             raise InputError("shape", f"{path!r} holds shape {tuple(data.shape)} (nz, ny, nx), "
                                       f"not the {shape} given")
@@ -282,8 +330,10 @@ def load_volume(path, shape=None, dtype=None, spacing=None, origin=None, mask_no
                                          f"spacing (sx,sy,sz); missing: {', '.join(missing)}")
         data = _load_raw(path, shape, dtype)
         origin = origin if origin is not None else (0.0, 0.0, 0.0)
-    data = _volume_dtype(data, path)
-    return Volume(data, spacing=spacing, origin=origin, mask_nonfinite=mask_nonfinite, orientation=orientation)
+    assumed = orientation is None and isinstance(file_orientation, _Assumed)
+    data, orientation = right_handed(_volume_dtype(data, path), orientation or file_orientation)
+    return Volume(data, spacing=spacing, origin=origin, mask_nonfinite=mask_nonfinite,
+                  orientation=orientation, modality=modality, orientation_assumed=assumed)
 
 
 SUPPORTED_VOLUMES = (".npy, .npz, .nrrd/.nhdr, .mhd/.mha, .nii/.nii.gz (with nibabel), a DICOM series (a folder, or "
@@ -397,22 +447,47 @@ def _is_dicom_path(path):
 _LPS = "LPS"
 
 
-def _axis_code(vector):
-    """The anatomical letter a direction in DICOM patient space points to (its largest
-    component, with its sign)."""
+def _axis_code(vector, space=_LPS):
+    """The anatomical letter a direction points to in a patient space (``space``: the
+    letters its +x, +y, +z point to; DICOM's LPS by default): its largest component, with
+    its sign."""
     axis = int(np.argmax(np.abs(vector)))
-    return _LPS[axis] if vector[axis] > 0 else _OPPOSITE[_LPS[axis]]
+    return space[axis] if vector[axis] > 0 else _OPPOSITE[space[axis]]
+
+
+def _direction_codes(vectors, space=_LPS):
+    """Where the index axes point (e.g. "RAS"), one letter per axis vector (rows of
+    ``vectors``, in ``space``); None unless the three name one each of R/L, A/P, S/I (an
+    axis halfway between two directions names none)."""
+    d = np.asarray(vectors, dtype=np.float64)
+    if d.shape != (3, 3) or not np.all(np.isfinite(d)) or np.any(np.abs(d).max(axis=1) <= 0):
+        return None
+    codes = "".join(_axis_code(v, space) for v in d)
+    pairs = {pair for c in codes for pair in ("RL", "AP", "SI") if c in pair}
+    return codes if len(pairs) == 3 else None
+
+
+def _modality_code(value):
+    """A modality as the Volume holds it ("CT", "MR", ...), or None for an empty, unknown
+    or malformed one."""
+    from .scene import _modality
+    text = str(value or "").strip().upper()
+    try:
+        return _modality(text) if text else None
+    except ValueError:
+        return None
 
 
 @_named_errors
 def _load_dicom_series(path):
-    """(data (nz, ny, nx), spacing, origin, orientation) of a DICOM series, through
+    """(data (nz, ny, nx), spacing, origin, orientation, modality) of a DICOM series, through
     pydicom: every file of ``path`` (a folder; or the folder of a ``.dcm`` file, keeping
     that file's series) of one SeriesInstanceUID, sorted along the slice normal by
     ImagePositionPatient, with RescaleSlope and RescaleIntercept applied (CT in HU).
     Columns run along the first ImageOrientationPatient vector (x), rows along the second
     (y), slices along their cross product (z); spacing from PixelSpacing and the slice
-    positions; orientation from those vectors in DICOM's LPS patient axes."""
+    positions; orientation from those vectors in DICOM's LPS patient axes; modality from
+    the Modality tag."""
     if not os.path.exists(path):
         raise MissingFileError("path", f"no such file or folder {path!r}")
     pydicom = _optional("pydicom", f"the DICOM series {path!r}")
@@ -471,11 +546,9 @@ def _load_dicom_series(path):
     data = np.stack(planes)
     if data.dtype.kind == "f" and np.all(data == np.round(data)) and -32768 <= data.min() and data.max() <= 32767:
         data = data.astype(np.int16)      # integer HU: keep them exact and small
-    orientation = _axis_code(row) + _axis_code(col) + _axis_code(normal)
-    if len(set(orientation)) != 3 or {_OPPOSITE[c] for c in orientation} & set(orientation):
-        orientation = None
+    orientation = _direction_codes([row, col, normal])
     origin = tuple(float(v) for v in first.ImagePositionPatient)
-    return np.ascontiguousarray(data), (dx, dy, dz), origin, orientation
+    return np.ascontiguousarray(data), (dx, dy, dz), origin, orientation, _modality_code(first.get("Modality"))
 
 
 @_named_errors
@@ -683,7 +756,8 @@ def _load_nrrd(path):
         raise InputError("sizes", f"{path!r}: the data does not match sizes {sizes} "
                                   f"of {header['type']}: {e}") from None
     spacing, origin = _nrrd_geometry(header, path)
-    return data, spacing, origin, _nrrd_orientation(header)
+    modality = next((v for k, v in header.items() if str(k).strip().lower() == "modality"), None)
+    return data, spacing, origin, _nrrd_orientation(header), _modality_code(modality)
 
 
 def _is_format_spec(spec):
@@ -765,22 +839,41 @@ _NRRD_SPACES = {"right-anterior-superior": "RAS", "ras": "RAS", "left-anterior-s
 _OPPOSITE = {"R": "L", "L": "R", "A": "P", "P": "A", "S": "I", "I": "S"}
 
 
+class _Assumed(str):
+    """An orientation code that is a format's convention, not the file's statement."""
+
+
+#: NRRD's non-anatomical 3-D spaces, read the way DICOM lays out a slice (columns towards
+#: the patient's left, rows towards the back), the third axis then fixed by the space's
+#: handedness: right-handed is LPS, left-handed LPI (VTK's CT head ``quarter.nhdr``, whose
+#: slices run from the crown down, says ``3D-left-handed``)
+_NRRD_CONVENTIONS = {"3d-right-handed": "LPS", "3d-right-handed-time": "LPS",
+                     "3d-left-handed": "LPI", "3d-left-handed-time": "LPI"}
+
+
 def _nrrd_orientation(header):
     """Where the index axes point anatomically (e.g. "RAS"), from an anatomical ``space``
     and the ``space directions`` (each axis named by its vector's largest component, with
-    its sign); None for other spaces (``3D-left-handed`` and the like)."""
-    space = _NRRD_SPACES.get(str(header.get("space", "")).lower())
+    its sign). A ``3D-right-handed`` or ``3D-left-handed`` space gives the convention of
+    ``_NRRD_CONVENTIONS``, marked as assumed; other spaces give None."""
+    name = str(header.get("space", "")).lower()
+    space = _NRRD_SPACES.get(name)
+    if space is None and name in _NRRD_CONVENTIONS:
+        directions = header.get("space directions")
+        try:
+            d = np.eye(3) if directions is None else np.array(directions, dtype=np.float64)
+        except (TypeError, ValueError):
+            return None
+        codes = _direction_codes(d, _NRRD_CONVENTIONS[name])
+        return None if codes is None else _Assumed(codes)
     if space is None:
         return None
     directions = header.get("space directions")
-    d = np.eye(3) if directions is None else np.array(directions, dtype=np.float64)
-    if d.shape != (3, 3) or not np.all(np.isfinite(d)):
+    try:
+        d = np.eye(3) if directions is None else np.array(directions, dtype=np.float64)
+    except (TypeError, ValueError):
         return None
-    codes = []
-    for vector in d:
-        axis = int(np.argmax(np.abs(vector)))
-        codes.append(space[axis] if vector[axis] > 0 else _OPPOSITE[space[axis]])
-    return "".join(codes) if len(set(codes)) == 3 else None
+    return _direction_codes(d, space)
 
 
 def _nrrd_geometry(header, path):
@@ -818,9 +911,59 @@ _MET_TYPES = {"MET_UCHAR": "u1", "MET_CHAR": "i1", "MET_USHORT": "u2", "MET_SHOR
               "MET_UINT": "u4", "MET_INT": "i4", "MET_ULONG": "u4", "MET_LONG": "i4",
               "MET_ULONG_LONG": "u8", "MET_LONG_LONG": "i8", "MET_FLOAT": "f4", "MET_DOUBLE": "f8"}
 
+#: MetaIO's modality names (MET_ImageModalityTypeName) as DICOM's codes; MET_MOD_UNKNOWN,
+#: like any name MetaIO does not know (it reads those as unknown), gives none.
+_MET_MODALITIES = {"MET_MOD_CT": "CT", "MET_MOD_MR": "MR", "MET_MOD_NM": "NM", "MET_MOD_US": "US",
+                   "MET_MOD_OTHER": "OT", "MET_MOD_UNKNOWN": ""}
+
+
+def _metaimage_matrix(fields):
+    """The header's TransformMatrix (or its other names, Rotation and Orientation), or None."""
+    return next((fields[k] for k in ("transformmatrix", "rotation", "orientation") if k in fields), None)
+
+
+def _metaimage_orientation(fields, path):
+    """Where the index axes point (dvr_gl's "to" letters, e.g. "LPS"), from a MetaImage
+    header; None where it does not say.
+
+    MetaIO keeps ITK's conventions. ITK's world is LPS (+x towards the patient's left, +y
+    posterior, +z superior), and ``TransformMatrix`` holds the direction cosines row by
+    row, row i the i-th index axis in that world (ITK's MetaImageIO writes
+    ``GetDirection(i)`` into row i). ``AnatomicalOrientation`` uses ITK's older "from"
+    letters: MetaImageIO writes an axis running from right to left as
+    ``MET_ORIENTATION_RL``, whose letter (``MET_OrientationTypeName``) is "R", so the
+    identity direction is written ``RAI`` (``itk::AnatomicalOrientation`` calls these its
+    NegativeEnum codes); each letter is the opposite of where the axis points. "?" is
+    MetaIO's unknown axis. A TransformMatrix other than the identity decides; an
+    identity one (which ITK writes for every image, VTK for images without orientation)
+    leaves it to AnatomicalOrientation. MetaIO reads ``Rotation`` and ``Orientation`` as
+    other names of TransformMatrix; so does this. A header that says neither is read as
+    ITK reads it, the identity in LPS, marked as assumed (``Volume.orientation_assumed``):
+    the first view faces that way, presets do not take the volume for a scan."""
+    matrix = _metaimage_matrix(fields)
+    if matrix is not None:
+        values = _float_list(matrix)
+        if values is None or len(values) != 9 or not all(math.isfinite(v) for v in values):
+            raise InputError("TransformMatrix", f"{path!r}: expected nine numbers (3x3 direction cosines), "
+                                                f"got {matrix!r}")
+        if values != [1, 0, 0, 0, 1, 0, 0, 0, 1]:
+            codes = _direction_codes(np.reshape(values, (3, 3)), _LPS)
+            if codes is not None or not fields.get("anatomicalorientation", "").strip():
+                return codes      # an oblique matrix without letters names no direction
+    letters = fields.get("anatomicalorientation", "").strip().upper()
+    if not letters:
+        # nothing said: ITK reads the image with the identity direction in its LPS world
+        return _Assumed(_LPS)
+    if len(letters) != 3 or not all(c in _OPPOSITE for c in letters):
+        return None       # "???" or malformed: no orientation
+    codes = "".join(_OPPOSITE[c] for c in letters)
+    pairs = {pair for c in codes for pair in ("RL", "AP", "SI") if c in pair}
+    return codes if len(pairs) == 3 else None
+
 
 @_named_errors
 def _load_metaimage(path):
+    """(data (nz, ny, nx), spacing, origin, orientation, modality) of a MetaImage."""
     fields = {}
     header_len = 0
     with open(path, "rb") as f:
@@ -876,11 +1019,13 @@ def _load_metaimage(path):
         if key in fields:
             origin = floats(key, name)
             break
-    matrix = fields.get("transformmatrix")
-    if matrix is not None and matrix.split() != "1 0 0 0 1 0 0 0 1".split() and \
-            _float_list(matrix) != [1, 0, 0, 0, 1, 0, 0, 0, 1]:
+    orientation = _metaimage_orientation(fields, path)
+    matrix = _metaimage_matrix(fields)
+    if matrix is not None and _float_list(matrix) != [1, 0, 0, 0, 1, 0, 0, 0, 1]:
         warnings.warn(f"{path}: TransformMatrix {matrix} is not the identity; the volume is used "
-                      "axis-aligned in index order", stacklevel=4)
+                      "axis-aligned in index order" + (f" (orientation {orientation})" if orientation else ""),
+                      stacklevel=4)
+    modality = _modality_code(_MET_MODALITIES.get(fields.get("modality", "").strip().upper()))
     datafile = need("ElementDataFile")
     if datafile.upper() == "LOCAL":
         with open(path, "rb") as f:
@@ -912,7 +1057,7 @@ def _load_metaimage(path):
         raise InputError("DimSize", f"{path!r}: the data holds {len(raw)} bytes, but DimSize {dims} of "
                                     f"{etype} needs {need_bytes}")
     data = np.frombuffer(raw, dtype=dtype).reshape(dims[::-1])
-    return data, spacing, origin
+    return data, spacing, origin, orientation, modality
 
 
 def _float_list(text):

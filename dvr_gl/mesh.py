@@ -61,6 +61,8 @@ class Topology:
     cell_max: np.ndarray
     convex: bool              # the whole mesh fills its convex hull (MPVO alone is exact)
     on_hull: np.ndarray       # (F,) bool: boundary faces in a supporting plane of all points
+    flat_pairs: np.ndarray    # (P, 2) int64: (cell below, cell above) a group of flat cells
+    flat_planes: np.ndarray   # (P, 4) float64: that group's plane (unit normal up, offset)
 
     def cell_planes(self):
         """(M, 4, 4) float64: per cell and local face, (outward unit normal, offset)."""
@@ -142,9 +144,73 @@ def _build_topology(mesh):
             chunk = hull_points[start:start + 256]
             beyond = np.maximum(beyond, (n_b @ chunk.T - d_b[:, None]).max(axis=1))
         on_hull[boundary] = beyond <= eps
+    flat_pairs, flat_planes = _across_flat_cells(pts, tets, flat, face_cells, tet_faces, faces)
     return Topology(tets=tets, flat=flat, faces=faces, face_cells=face_cells, tet_faces=tet_faces,
                     tet_face_sign=sign, normals=normal, offsets=offsets, centroids=p.mean(axis=1),
-                    cell_min=s.min(axis=1), cell_max=s.max(axis=1), convex=convex, on_hull=on_hull)
+                    cell_min=s.min(axis=1), cell_max=s.max(axis=1), convex=convex, on_hull=on_hull,
+                    flat_pairs=flat_pairs, flat_planes=flat_planes)
+
+
+def _across_flat_cells(pts, tets, flat, face_cells, tet_faces, faces):
+    """The cells that face each other across a layer of zero-volume cells.
+
+    A flat cell (Delaunay meshes of lattice or cospherical points have them, between two
+    triangulations of one planar quad) has no inside, so its winding says nothing about
+    which side its neighbours are on, and a face constraint through it can point the
+    wrong way (and close a cycle). Flat cells are therefore left out of the face
+    constraints; each group of them joined by faces lies in one plane, and every real
+    cell below that plane faces every real cell above it across the group. Which side a
+    neighbour is on comes from its own vertex off the shared face, never from a flat
+    cell's winding. Returns (below, above) cell pairs and each pair's plane, oriented
+    from below to above."""
+    none = np.zeros((0, 2), np.int64), np.zeros((0, 4))
+    flat_cells = np.flatnonzero(flat)
+    if flat_cells.size == 0:
+        return none
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    a, b = face_cells[:, 0], face_cells[:, 1]
+    inner = b >= 0
+    both = inner & flat[a] & flat[np.maximum(b, 0)]
+    M = len(tets)
+    graph = coo_matrix((np.ones(both.sum()), (a[both], b[both])), shape=(M, M))
+    _, group = connected_components(graph, directed=False)
+    # faces between one flat cell and one real cell: the real cell's vertex off the face
+    one = inner & (flat[a] != flat[np.maximum(b, 0)])
+    f = np.flatnonzero(one)
+    flat_side = np.where(flat[a[f]], a[f], b[f])
+    real = np.where(flat[a[f]], b[f], a[f])
+    if f.size == 0:
+        return none
+    local = np.argmax(tet_faces[real] == f[:, None], axis=1)   # face i is opposite vertex i
+    off_face = pts[tets[real, local]]
+    # each group's plane from its largest face (the flat cells' faces all lie in it)
+    tri = pts[faces[f]]
+    cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    area = np.linalg.norm(cross, axis=1)
+    g = group[flat_side]
+    best = np.full(M, -1.0)
+    np.maximum.at(best, g, area)
+    pick = np.full(M, -1, np.int64)
+    pick[g[area == best[g]]] = np.flatnonzero(area == best[g])
+    normal = cross[pick[g]] / np.maximum(area[pick[g]], 1e-300)[:, None]
+    offset = np.einsum("ij,ij->i", normal, tri[pick[g]].mean(axis=1))
+    height = np.einsum("ij,ij->i", normal, off_face) - offset
+    below, above = height < 0, height > 0
+    # join below and above records of the same group
+    ob, oa = np.flatnonzero(below), np.flatnonzero(above)
+    ob, oa = ob[np.argsort(g[ob], kind="stable")], oa[np.argsort(g[oa], kind="stable")]
+    ga = g[oa]
+    lo, hi = np.searchsorted(ga, g[ob], "left"), np.searchsorted(ga, g[ob], "right")
+    cnt = hi - lo
+    if cnt.sum() == 0:
+        return none
+    rec_b = np.repeat(ob, cnt)
+    rec_a = oa[np.repeat(lo - np.cumsum(cnt) + cnt, cnt) + np.arange(cnt.sum())]
+    pairs = np.stack([real[rec_b], real[rec_a]], axis=1)
+    planes = np.concatenate([normal[rec_b], offset[rec_b, None]], axis=1)
+    keep = pairs[:, 0] != pairs[:, 1]
+    return pairs[keep], planes[keep]
 
 
 def _convex_hull(points, volume):
@@ -212,15 +278,24 @@ def mpvo_order(mesh, cells, scene):
     fc = topo.face_cells
     shared = (fc[:, 1] >= 0)
     shared &= member[fc[:, 0]] & member[np.maximum(fc[:, 1], 0)]
+    shared &= ~topo.flat[fc[:, 0]] & ~topo.flat[np.maximum(fc[:, 1], 0)]   # see _across_flat_cells
     f = np.flatnonzero(shared)
     side = _eye_side(topo.normals[f], topo.offsets[f], scene, mesh)
     a, b = fc[f, 0], fc[f, 1]
+    # across a layer of flat cells: "above" plays b, "below" a
+    pairs = topo.flat_pairs
+    pairs_in = member[pairs[:, 0]] & member[pairs[:, 1]]
+    side = np.concatenate([side, _eye_side(topo.flat_planes[pairs_in, :3], topo.flat_planes[pairs_in, 3],
+                                           scene, mesh)])
+    a, b = np.concatenate([a, pairs[pairs_in, 0]]), np.concatenate([b, pairs[pairs_in, 1]])
     # side > 0: the eye is beyond the face, on b's side: b is in front, a drawn first
     src = np.concatenate([a[side > 0], b[side < 0]])
     dst = np.concatenate([b[side > 0], a[side < 0]])
     whole = len(cells) == M
     gaps = 0
     if not (whole and topo.convex):
+        # flat cells stay members here: a layer of them inside the domain is no boundary
+        # (as a gap of no depth, its exits and entries would tie in depth and pair wrongly)
         gs, gd = _gap_constraints(mesh, topo, member, scene)
         gaps = len(gs)
         src = np.concatenate([src, gs])

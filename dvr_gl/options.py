@@ -21,7 +21,7 @@ SORTS = ("mpvo", "centroid")  # dvr_gl.techniques.tetra's orders (imported lazil
 # Which command-line option an InputError's field stands for.
 OPTION_OF_FIELD = {"path": "INPUT", "shape": "--shape", "dtype": "--dtype", "spacing": "--spacing",
                     "origin": "--origin", "size": "--size", "background": "--background",
-                    "scalars": "--scalars", "tf": "--tf"}
+                    "scalars": "--scalars", "tf": "--tf", "orientation": "--orientation"}
 
 
 class UsageError(Exception):
@@ -85,6 +85,7 @@ _size = _arg_type(dvr_io.parse_size, "size")
 _shape = _arg_type(lambda t: dvr_io.parse_triplet(t, "shape", kind=int, positive=True), "shape")
 _spacing = _arg_type(lambda t: dvr_io.parse_triplet(t, "spacing", positive=True), "spacing")
 _origin = _arg_type(lambda t: dvr_io.parse_triplet(t, "origin"), "origin")
+_orientation = _arg_type(dvr_io.parse_orientation, "orientation")
 
 
 def _background_value(text):
@@ -119,7 +120,9 @@ def add_render_options(r):
     r.add_argument("input", metavar="INPUT", help="volume file, mesh file (.vtu, .vtk, .npz with points "
                                                   "and tets, ...) or builtin:NAME")
     r.add_argument("--tf", metavar="PRESET|FILE.json",
-                   help=f"transfer function: a preset ({', '.join(PRESETS)}) or a JSON file "
+                   help=f"transfer function: a preset ({', '.join(PRESETS)}), ct_8bit:LO,HI (likewise "
+                        "ct_bone_8bit, ct_lung_8bit) for CT windowed to 8 bits from LO to HI Hounsfield units, "
+                        "cmap:NAME for any matplotlib colormap, or a JSON file "
                         "{\"color\": [[s, r, g, b], ...], \"opacity\": [[s, a], ...], \"unit_distance\": u}, "
                         "or a 2D one over (value, gradient magnitude) {\"widgets\": [...]} or {\"table\": ...}; "
                         "default: auto (the data set's own for builtin inputs)")
@@ -135,11 +138,15 @@ def add_render_options(r):
     r.add_argument("--seed", type=_count, metavar="N", help="particles: random seed (default: 0)")
     r.add_argument("--radius", type=_positive, metavar="W",
                    help="particles: particle radius in world units (default: half a pixel at the data); "
-                        "splat: kernel standard deviation in sample spacings (default: 0.4)")
+                        "splat --kernel gaussian: kernel standard deviation in sample spacings (default: 0.4)")
+    r.add_argument("--kernel", choices=("tent", "gaussian"),
+                   help="splat: trilinear tents into post-classified sheets (default for grids) or "
+                        "pre-classified Gaussian footprints (meshes' only kernel)")
     r.add_argument("--density", type=_count, metavar="K",
-                   help="splat: samples per data spacing along each axis (default: 1)")
+                   help="splat: sheets per smallest spacing (tent) or samples per spacing along each axis "
+                        "(gaussian) (default: 1)")
     r.add_argument("--cutoff", type=_positive, metavar="C",
-                   help="splat: kernel truncation in standard deviations (default: 3)")
+                   help="splat --kernel gaussian: kernel truncation in standard deviations (default: 3)")
     r.add_argument("--sampler", choices=("rejection", "uniform", "metropolis"),
                    help="particles: placement in each cell (default: rejection, unbiased)")
     r.add_argument("--step", type=_positive, metavar="S",
@@ -186,8 +193,8 @@ def add_render_options(r):
                    help="image size in pixels (default: 512x512)")
     r.add_argument("--azimuth", type=_number, default=None, metavar="DEG",
                    help="turn the camera about the up direction (default: 30). 0 looks along -z with +y "
-                        "up, or, for a file with an anatomical orientation (NIfTI, NRRD), at the face "
-                        "with the head up")
+                        "up, or, for a scan with an anatomical orientation (from its file or --orientation), "
+                        "at the face with the head up")
     r.add_argument("--elevation", type=_number, default=None, metavar="DEG",
                    help="then raise it towards the up direction (default: 20)")
     r.add_argument("--zoom", type=_positive, default=1.0, metavar="F", help="> 1 moves closer (default: 1)")
@@ -204,17 +211,27 @@ def add_render_options(r):
     raw.add_argument("--spacing", type=_spacing, metavar="SX,SY,SZ",
                      help="sample spacing (required for raw files; replaces the file's otherwise)")
     raw.add_argument("--origin", type=_origin, metavar="OX,OY,OZ", help="world position of the first sample")
+    add_orientation_option(raw)
     raw.add_argument("--mask-nonfinite", action="store_true",
                      help="treat NaN and inf samples as outside the volume instead of rejecting them")
     r.add_argument("--backend", choices=("auto", "egl", "osmesa"), default="auto",
                    help="headless GL backend (default: auto, EGL then OSMesa)")
 
 
+def add_orientation_option(group):
+    """``--orientation CODE``, shared by render, view and info."""
+    group.add_argument("--orientation", type=_orientation, metavar="CODE",
+                       help="where the x, y and z axes point anatomically, three letters such as RAS (x "
+                            "towards the patient's right, y anterior, z superior) or LPI; replaces the "
+                            "file's, or supplies one where the file has none, so that the first view "
+                            "faces the subject with the head up")
+
+
 # which technique takes which option
 TECHNIQUE_OPTIONS = {"interpolate": ("slice2d",), "proxy": ("slice3d",), "shells": ("slice3d",),
                      "preintegrate": ("raycast", "slice2d", "slice3d"), "sort": ("tetra",),
                      "repetitions": ("particles",), "seed": ("particles",), "radius": ("particles", "splat"),
-                     "sampler": ("particles",), "density": ("splat",), "cutoff": ("splat",),
+                     "sampler": ("particles",), "density": ("splat",), "cutoff": ("splat",), "kernel": ("splat",),
                      "gradients": ("raycast", "slice2d", "slice3d"), "tolerance": ("raycast",)}
 
 #: the techniques that render meshes (cell projection); the others render grid volumes
@@ -222,7 +239,8 @@ MESH_TECHNIQUES = ("tetra",)
 GRID_TECHNIQUES = ("raycast", "slice2d", "slice3d")
 
 # volume-only options (raw geometry and masking): given with a mesh INPUT, a usage error
-_VOLUME_OPTIONS = (("spacing", "--spacing"), ("origin", "--origin"), ("mask_nonfinite", "--mask-nonfinite"))
+_VOLUME_OPTIONS = (("spacing", "--spacing"), ("origin", "--origin"), ("mask_nonfinite", "--mask-nonfinite"),
+                   ("orientation", "--orientation"))
 
 
 def input_is_mesh(args):
@@ -246,7 +264,7 @@ def technique_options(args):
     if getattr(args, "tolerance", None) is not None and args.step is not None:
         raise UsageError("--tolerance", "chooses the step: leave out --step")
     for name in ("step", "tolerance", "preintegrate", "interpolate", "proxy", "shells", "sort", "repetitions",
-                 "seed", "radius", "sampler", "density", "cutoff", "gradients", "target"):
+                 "seed", "radius", "sampler", "kernel", "density", "cutoff", "gradients", "target"):
         value = getattr(args, name, None)
         if value is None or value is False:
             continue
@@ -296,7 +314,8 @@ def load_input_args(args):
     """The volume (or mesh) and the default preset name (dvr_gl.inputs.load_input)."""
     from .inputs import load_input
     return load_input(args.input, scalars=getattr(args, "scalars", None), shape=args.shape, dtype=args.dtype,
-                      spacing=args.spacing, origin=args.origin, mask_nonfinite=args.mask_nonfinite)
+                      spacing=args.spacing, origin=args.origin, mask_nonfinite=args.mask_nonfinite,
+                      orientation=getattr(args, "orientation", None))
 
 
 def resolve_tf_option(spec, volume, default):

@@ -198,9 +198,14 @@ class Renderer:
             key = (tol.pilot_scene(scene).digest(), repr(sorted(options.items())), preintegrate)
             # the pilot measures the step's error alone
             opts = dict(options, ert_transmittance=0.0, preintegrate=preintegrate)
-            model = self._error_models.get(key, lambda: tol.measure(
-                lambda s, h: self.render(s, technique, step=h, **opts), scene))
-            return tol.choose_step(model, scene, tolerance, preintegrate)
+
+            def pilot(s, h):
+                return self.render(s, technique, step=h, **opts)
+
+            model = self._error_models.get(key, lambda: tol.measure(pilot, scene))
+            model, chosen = tol.verified(model, pilot, scene, tolerance, preintegrate)
+            self._error_models.put(key, model)        # with the steps verified, for the next request
+            return chosen
 
         if "preintegrate" in options:
             self.last_choice = choice(bool(options["preintegrate"]))

@@ -123,10 +123,19 @@ class Volume:
     mask_nonfinite : if True, NaN/inf samples are allowed and every grid cell with a
         non-finite corner is removed from the domain (no emission, no absorption);
         otherwise non-finite samples are an error.
+    orientation : None, or three letters naming where the x, y and z index axes point
+        anatomically ("RAS": x towards the patient's right, ...); the first view faces the
+        subject and transfer-function presets take it as a scan's.
+    modality : None, or the imaging modality as DICOM names it ("CT", "MR", ...), from
+        the file's metadata; presets use it (an 8-bit "CT" gets the windowed CT preset).
+    orientation_assumed : True where ``orientation`` is the file format's convention
+        rather than the file's statement (a MetaImage without orientation fields is in
+        ITK's LPS frame; see ``dvr_gl.io``): the first view uses it, presets do not take
+        the volume for a scan because of it.
     """
 
     def __init__(self, data, spacing=(1.0, 1.0, 1.0), origin=(0.0, 0.0, 0.0), mask_nonfinite=False,
-                 orientation=None):
+                 orientation=None, modality=None, orientation_assumed=False):
         if not isinstance(data, np.ndarray):
             raise TypeError(f"data must be a numpy array, got {type(data).__name__}")
         if data.dtype.type not in SUPPORTED_DTYPES:
@@ -140,6 +149,8 @@ class Volume:
         self.origin = _vector3("origin", origin)
         self.mask_nonfinite = bool(mask_nonfinite)
         self.orientation = _orientation(orientation)
+        self.orientation_assumed = bool(orientation_assumed) and self.orientation is not None
+        self.modality = _modality(modality)
 
         data = np.array(data, copy=True, order="C")
         data.setflags(write=False)
@@ -825,6 +836,18 @@ def _orientation(codes):
     if len(text) != 3 or sorted(pair_of.get(c, -1) for c in text) != [0, 1, 2]:
         raise ValueError(f"orientation must be three letters, one each of R/L, A/P and S/I (as 'RAS'), "
                          f"got {codes!r}")
+    return text
+
+
+def _modality(value):
+    """None, or a modality code as DICOM writes it: up to 16 capitals, digits, spaces or
+    underscores ("CT", "MR", "PT"), given in either case."""
+    if value is None:
+        return None
+    text = value.strip().upper() if isinstance(value, str) else None
+    if not text or len(text) > 16 or not all(c.isascii() and (c.isalnum() or c in " _") for c in text):
+        raise ValueError(f"modality must be a code such as 'CT' or 'MR' (up to 16 letters, digits, spaces or "
+                         f"underscores), got {value!r}")
     return text
 
 

@@ -208,6 +208,79 @@ def ct_preset(data, kind="ct") -> TransferFunction:
                  (1200, 0.7)], unit_distance=unit)
 
 
+#: the Hounsfield window each 8-bit CT preset assumes the data was made with, (lo, hi):
+#: stored 0 is ``lo`` HU (and everything below), 255 is ``hi`` (and everything above).
+#: ``ct_bone_8bit``: the usual bone window, width 1800 and level 400; ``ct_lung_8bit``:
+#: the usual lung window, W1500 L-600. ``ct_8bit`` (skin and bone together) W1000 L100:
+#: the usual soft-tissue window (W400 L40) puts stored 0, the air around the body, at
+#: -160 HU, inside ``ct``'s skin veil, and cuts bone off at 240 HU, below where ``ct``
+#: makes it opaque; on a chest CT windowed to 8 bits, W1000 L100 shows skin, heart and
+#: ribs (README, "The first picture"). ``NAME:LO,HI`` gives the window the data was made with.
+CT_8BIT_WINDOWS = {"ct_8bit": (-400.0, 600.0), "ct_bone_8bit": (-500.0, 1300.0), "ct_lung_8bit": (-1350.0, 150.0)}
+#: the highest stored value of 8-bit data: the window's top
+STORED_MAX = 255.0
+
+
+def parse_hu_window(text):
+    """``"LO,HI"`` (Hounsfield units, LO < HI) -> (lo, hi); a ValueError says what is wrong."""
+    parts = [p.strip() for p in str(text).split(",")]
+    try:
+        if len(parts) != 2:
+            raise ValueError
+        lo, hi = (float(p) for p in parts)
+    except ValueError:
+        raise ValueError(f"the window must be two numbers LO,HI in Hounsfield units (such as -160,240), "
+                         f"got {text!r}") from None
+    if not (np.isfinite(lo) and np.isfinite(hi)) or lo >= hi:
+        raise ValueError(f"the window LO,HI must be finite with LO < HI, got {text!r}")
+    return lo, hi
+
+
+def stored_to_hu(v, window):
+    """The Hounsfield value that stored 8-bit value ``v`` stands for under ``window``
+    (lo, hi): lo + (hi - lo) v / 255, linear (as windowing maps HU onto 0..255)."""
+    lo, hi = window
+    return lo + (hi - lo) * np.asarray(v, dtype=np.float64) / STORED_MAX
+
+
+def ct_8bit_preset(data, kind="ct_8bit", window=None) -> TransferFunction:
+    """A CT preset for CT windowed to 8 bits: stored values 0..255 stand for the Hounsfield
+    ``window`` (lo, hi) linearly (default: ``CT_8BIT_WINDOWS[kind]``), and the colour and
+    opacity at stored ``v`` are the HU preset's (``ct``, ``ct_bone``, ``ct_lung`` for
+    ``kind`` without ``_8bit``) at ``stored_to_hu(v, window)``.
+
+    The HU preset is piecewise linear and the map affine, so their composition is
+    piecewise linear in stored values with the HU control points inside the window as
+    knots, plus the window's ends at 0 and 255: the result equals the HU preset at the
+    window's HU for every stored value in 0..255 (to float rounding; no resampling).
+    Data outside 0..255 is an error: it was not windowed to 8 bits."""
+    if kind not in CT_8BIT_WINDOWS:
+        raise ValueError(f"no 8-bit CT preset {kind!r}; there are {', '.join(CT_8BIT_WINDOWS)}")
+    lo, hi = CT_8BIT_WINDOWS[kind] if window is None else window
+    if not (np.isfinite(lo) and np.isfinite(hi)) or lo >= hi:
+        raise ValueError(f"the window must be finite with low < high, got {window!r}")
+    d_lo, d_hi = data.data_range
+    if d_lo < 0 or d_hi > STORED_MAX:
+        raise ValueError(f"{kind} is for CT windowed to 8 bits (stored values 0..255); these values run "
+                         f"{d_lo:g}..{d_hi:g}; for CT in Hounsfield units use {kind[:-len('_8bit')]}")
+    hu_tf = ct_preset(data, kind[:-len("_8bit")])
+
+    def through_window(points, values):
+        inner = points[:, 0][(points[:, 0] > lo) & (points[:, 0] < hi)]
+        hu = np.concatenate([[lo], inner, [hi]])
+        stored = np.concatenate([[0.0], (inner - lo) * (STORED_MAX / (hi - lo)), [STORED_MAX]])
+        return [(float(v), *(float(c) for c in np.atleast_1d(row))) for v, row in zip(stored, values(hu))]
+
+    return TransferFunction(color=through_window(hu_tf.color_points, hu_tf.color),
+                            opacity=through_window(hu_tf.opacity_points, hu_tf.opacity),
+                            unit_distance=hu_tf.unit_distance)
+
+
+def is_8bit(data):
+    """Stored as 8-bit samples (uint8), as CT windowed for display is."""
+    return not isinstance(data, TetMesh) and data.data.dtype == np.uint8
+
+
 def mr_preset(data) -> TransferFunction:
     """MRI: the background (the darkest two fifths of the samples) clear, tissue from
     pink to white, opacity rising to 0.6 at the 99.5th percentile; meant to be lit."""
@@ -216,13 +289,17 @@ def mr_preset(data) -> TransferFunction:
 
 
 def auto_preset(volume, unit_distance=None) -> TransferFunction:
-    """The preset the data suggests: CT in Hounsfield units gets ``ct``; a volume with an
-    anatomical orientation (an MRI from NIfTI or NRRD) ``mr``; a mesh the ``coolwarm``
-    ramp over the 1st to 99th percentile; anything else the ``warm`` ramp (dark red to
-    ivory) from the median to the 99.5th percentile; opacity rising from 0 to 0.5. Unit
-    distance one voxel (the smallest spacing; a mesh: the median edge length); a given
-    ``unit_distance`` keeps to the ramps."""
+    """The preset the data suggests: 8-bit data whose metadata says CT (``modality``)
+    gets ``ct_8bit``; CT in Hounsfield units ``ct``; an MRI (modality MR, or a volume
+    with an anatomical orientation, from NIfTI, NRRD, MetaImage or DICOM) ``mr``; a mesh
+    the ``coolwarm`` ramp over the 1st to 99th percentile; anything else the ``warm`` ramp
+    (dark red to ivory) from the median to the 99.5th percentile; opacity rising from 0
+    to 0.5. Unit distance one voxel (the smallest spacing; a mesh: the median edge
+    length); a given ``unit_distance`` keeps to the ramps. 8-bit data without metadata is
+    not taken for CT: MR scans and microscopy have most samples at 0 too."""
     name = auto_preset_name(volume)
+    if name == "ct_8bit" and unit_distance is None:
+        return ct_8bit_preset(volume)
     if name == "ct" and unit_distance is None:
         return ct_preset(volume)
     if name == "mr" and unit_distance is None:
@@ -236,11 +313,20 @@ def auto_preset(volume, unit_distance=None) -> TransferFunction:
 
 def auto_preset_name(data):
     """The name of the preset :func:`auto_preset` picks."""
+    modality = getattr(data, "modality", None)
+    if modality == "CT" and is_8bit(data):
+        return "ct_8bit"
     if looks_like_hu(data):
         return "ct"
-    if getattr(data, "orientation", None) is not None:
+    if modality == "MR" or is_oriented_scan(data):
         return "mr"
     return "coolwarm ramp" if isinstance(data, TetMesh) else "warm ramp"
+
+
+def is_oriented_scan(data):
+    """Whether the file (or the user) says where the patient's axes are: an orientation
+    that is only the format's convention (``Volume.orientation_assumed``) does not count."""
+    return getattr(data, "orientation", None) is not None and not getattr(data, "orientation_assumed", False)
 
 
 def read_json_object(path):

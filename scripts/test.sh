@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Run the whole dvr_gl test suite headless. Installs the system packages the tests need
-# when they are missing (Mesa EGL/llvmpipe, OSMesa, Xvfb; apt-get, as root), then runs
+# when they are missing (Mesa EGL/llvmpipe, OSMesa, Xvfb, Chromium; apt-get, as root), then runs
 # pytest; fails if any test fails or if no test ran.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -9,6 +9,8 @@ missing=()
 ldconfig -p | grep -q 'libEGL.so.1 ' || missing+=(libegl1 libegl-mesa0 libgl1-mesa-dri)
 ldconfig -p | grep -q 'libOSMesa.so' || missing+=(libosmesa6)
 command -v Xvfb >/dev/null 2>&1 || missing+=(xvfb)
+# the notebook widget is tested in JupyterLab in a real browser engine
+command -v chromium >/dev/null 2>&1 || missing+=(chromium)
 if [ ${#missing[@]} -gt 0 ]; then
     echo "installing system packages: ${missing[*]}"
     if [ "$(id -u)" -eq 0 ]; then SUDO=""; else SUDO="sudo"; fi
@@ -26,10 +28,14 @@ set +e
 python -m pytest -q -p no:cacheprovider "$@" 2>&1 | tee "$log"
 status=${PIPESTATUS[0]}
 set -e
+if [ "$status" -eq 5 ]; then        # pytest's own code for "no tests collected"
+    echo "no test ran" >&2
+    exit 1
+fi
 if [ "$status" -ne 0 ]; then
     exit "$status"
 fi
-if ! grep -Eq '[0-9]+ passed' "$log"; then
-    echo "no test ran" >&2
+if grep -Eq '(^| )[0-9]+ skipped' "$log" && ! grep -Eq '[0-9]+ passed' "$log"; then
+    echo "no test ran (all skipped)" >&2
     exit 1
 fi

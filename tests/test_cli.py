@@ -495,6 +495,67 @@ def test_info_file_errors_exit_2(tiny, capsys, argv, fragment):
     assert "Traceback" not in err
 
 
+def test_info_names_the_orientation_or_how_to_give_one(tiny, tiny_mesh, tmp_path, capsys):
+    d, _ = tiny
+    code, out, err = _run(["info", d / "tiny.npy"], capsys)
+    assert code == 0, err
+    assert "orientation none in the file" in out and "--orientation CODE" in out
+    code, out, err = _run(["info", d / "tiny.npy", "--orientation", "lps"], capsys)
+    assert code == 0, err
+    assert "orientation LPS (x, y, z point left, posterior, superior; given by --orientation)" in out
+    code, out, err = _run(["info", d / "tiny.npy", "--orientation", "lpi"], capsys)
+    assert code == 0, err
+    assert "orientation RPI (x, y, z point right, posterior, inferior; --orientation LPI is a left-handed frame: " \
+           "loaded with x reversed" in out
+    assert "preset     auto: mr (" in out       # an anatomically oriented scan: the MR preset
+    # a MetaImage saying where its axes point (ITK's "from" letters) and that it is 8-bit CT
+    (tmp_path / "c.raw").write_bytes(np.arange(120, dtype=np.uint8).tobytes())
+    (tmp_path / "c.mhd").write_text("NDims = 3\nDimSize = 6 5 4\nElementType = MET_UCHAR\n"
+                                    "AnatomicalOrientation = RAI\nModality = MET_MOD_CT\nElementDataFile = c.raw\n")
+    code, out, err = _run(["info", tmp_path / "c.mhd"], capsys)
+    assert code == 0, err
+    assert "orientation LPS (x, y, z point left, posterior, superior)" in out and "modality   CT" in out
+    assert "preset     auto: ct_8bit (0..255," in out
+    # a MetaImage that says nothing: ITK's convention, said to be assumed
+    (tmp_path / "n.mhd").write_text("NDims = 3\nDimSize = 6 5 4\nElementType = MET_UCHAR\nElementDataFile = c.raw\n")
+    code, out, err = _run(["info", tmp_path / "n.mhd"], capsys)
+    assert code == 0, err
+    assert "orientation LPS (x, y, z point left, posterior, superior; assumed: the file names no anatomy" in out
+    assert "preset     auto: warm ramp" in out          # an assumed orientation does not make it a scan
+    for argv, fragment in (([d / "tiny.npy", "--orientation", "RAL"], "argument --orientation: expected three "
+                                                                      "letters, one each of R/L, A/P and S/I"),
+                           ([tiny_mesh[0] / "tiny.vtu", "--orientation", "RAS"], "--orientation: is for grid volumes")):
+        code, out, err = _run(["info"] + argv, capsys)
+        assert code == 2 and fragment in err and "Traceback" not in err, err
+
+
+def test_render_and_view_take_an_orientation(renderer, tiny, capsys):
+    """--orientation supplies where the axes point: the first view then faces the subject
+    (the same picture as the library's for that Volume), in render and in the viewer."""
+    from dvr_gl.viewer import build_parser, settings_from_args
+    d, a = tiny
+    out = d / "o.png"
+    code, stdout, err = _run(["render", d / "tiny.npy", "--orientation", "RIA", "--tf", "warm", "--size", "24x20",
+                              "--out", out], capsys)
+    assert code == 0, err
+    assert "from the front, head up" in stdout
+    vol = dvr_gl.Volume(a, orientation="RIA")
+    scene = dvr_gl.Scene(vol, dvr_gl.inputs.PRESETS["warm"](vol), first_camera(vol), 24, 20, shading=True)
+    assert np.array_equal(_png(out)[1], to_png_array(renderer.render(scene)))
+    code, _, err = _run(["render", d / "tiny.npy", "--orientation", "up", "--out", out], capsys)
+    assert code == 2 and "argument --orientation" in err and "'up'" in err, err
+    settings = settings_from_args(build_parser().parse_args([str(d / "tiny.npy"), "--orientation", "rpi"]))
+    assert settings.volume.orientation == "RPI"
+
+
+def test_render_8bit_ct_window_errors_name_tf(tiny, capsys):
+    d, _ = tiny
+    code, _, err = _run(["render", d / "tiny.npy", "--tf", "ct_8bit:400,40", "--out", d / "x.png"], capsys)
+    assert code == 2 and "--tf: the window LO,HI must be finite with LO < HI, got '400,40'" in err, err
+    code, _, err = _run(["render", d / "tiny.npy", "--tf", "ct_8bit:-1000,1000", "--out", d / "x.png"], capsys)
+    assert code == 0 and (d / "x.png").exists(), err     # a float volume within 0..255: the window applies
+
+
 def test_mesh_bench_quick_run(tmp_path, capsys):
     """`dvr-gl bench --suite mesh` end to end on the bundled Delaunay ball (64x64): rows for
     both sorts and VTK, dvr_gl's error far below 1e-3 and below VTK's, the CPU
@@ -577,12 +638,12 @@ def test_render_splat_options(renderer, tiny, capsys):
     d, _ = tiny
     vol = load_volume(d / "tiny.npy")
     out = d / "splat.png"
-    argv = ["--technique", "splat", "--density", "2", "--radius", "0.5", "--cutoff", "2.5", "--size", "24x24",
-            "--out", out]
+    argv = ["--technique", "splat", "--kernel", "gaussian", "--density", "2", "--radius", "0.5", "--cutoff", "2.5",
+            "--size", "24x24", "--out", out]
     code, stdout, err = _run(["render", d / "tiny.npy"] + argv, capsys)
     assert code == 0, err
     scene = dvr_gl.Scene(vol, auto_preset(vol), first_camera(vol), 24, 24)
-    want = renderer.render(scene, technique="splat", density=2, radius=0.5, cutoff=2.5)
+    want = renderer.render(scene, technique="splat", kernel="gaussian", density=2, radius=0.5, cutoff=2.5)
     assert np.array_equal(_png(out)[1], to_png_array(want)) and want[..., 3].max() > 0
     for extra, message in ((["--step", "1"], "--step: splat takes no step"),
                            (["--seed", "1"], "--seed: applies to --technique particles only, not splat")):

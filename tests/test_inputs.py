@@ -131,8 +131,9 @@ def test_auto_picks_the_preset_the_data_suggests():
     # colormaps through matplotlib, by name or as cmap:NAME; every named preset makes a TF
     name, tf = inputs.resolve_tf("cmap:twilight", other)
     assert name == "cmap:twilight" and len(tf.color_points) == 9
-    for preset in inputs.PRESETS:
-        assert inputs.resolve_tf(preset, hu)[1].unit_distance > 0
+    eight = dvr_gl.Volume(rng.integers(0, 256, (8, 9, 10)).astype(np.uint8))
+    for preset in inputs.PRESETS:      # the 8-bit CT forms take 8-bit data (tested below)
+        assert inputs.resolve_tf(preset, eight if preset.endswith("_8bit") else hu)[1].unit_distance > 0
     with pytest.raises(InputError, match="matplotlib has no colormap 'nope'"):
         inputs.resolve_tf("cmap:nope", other)
     with pytest.raises(InputError, match="cmap:NAME for any matplotlib colormap"):
@@ -171,3 +172,161 @@ def test_an_iso_value_outside_the_data_warns(tmp_path, capsys):
     assert cli.main(["render", str(tmp_path / "v.npy"), "--iso", "7", "--size", "16x16", "-o",
                      str(tmp_path / "v.png")]) == 0
     assert "warning: --iso 7 is outside the data's range" in capsys.readouterr().err
+
+
+# -- CT windowed to 8 bits ------------------------------------------------------------------
+
+EIGHT_BIT_KINDS = ("ct_8bit", "ct_bone_8bit", "ct_lung_8bit")
+
+
+@pytest.mark.parametrize("kind", EIGHT_BIT_KINDS)
+@pytest.mark.parametrize("window", [None, (-160.0, 240.0), (-1024.0, 3071.0), (300.0, 301.0)])
+def test_8bit_ct_preset_is_the_hu_preset_through_the_window(kind, window):
+    """At stored value v the 8-bit preset's colour and opacity are the HU preset's at
+    lo + (hi - lo) v / 255. The HU preset is piecewise linear and the window affine, so
+    the composition is piecewise linear with the mapped HU knots inside the window and the
+    window's ends at 0 and 255: no resampling, only the rounding of each mapped knot's
+    position (a few ulps of 255, about 1e-13) times the largest slope in stored units
+    (the presets change by at most 1 over 100 HU, times (hi - lo) / 255 HU per stored unit
+    <= 16 for these windows): below 1e-11."""
+    from dvr_gl.transfer import CT_8BIT_WINDOWS, ct_8bit_preset, ct_preset, stored_to_hu
+    data = dvr_gl.Volume(np.random.default_rng(4).integers(0, 256, (6, 7, 8)).astype(np.uint8), spacing=(2, 1, 3))
+    tf8 = ct_8bit_preset(data, kind, window)
+    hu_tf = ct_preset(data, kind[:-len("_8bit")])
+    window = window or CT_8BIT_WINDOWS[kind]
+    v = np.concatenate([np.arange(256.0), np.linspace(0, 255, 25501)])
+    hu = stored_to_hu(v, window)
+    assert hu[0] == window[0] and hu[255] == window[1]
+    np.testing.assert_allclose(tf8.color(v), hu_tf.color(hu), rtol=0, atol=1e-11)
+    np.testing.assert_allclose(tf8.opacity(v), hu_tf.opacity(hu), rtol=0, atol=1e-11)
+    assert tf8.knots[0] == 0 and tf8.knots[-1] == 255 and tf8.unit_distance == hu_tf.unit_distance == 1
+    # the stored values are not HU: read as HU, the same data would get another picture
+    assert np.abs(tf8.opacity(v) - hu_tf.opacity(v)).max() > 0.04
+
+
+def test_8bit_ct_windows_named_and_their_errors():
+    from dvr_gl.transfer import CT_8BIT_WINDOWS, ct_8bit_preset
+    eight = dvr_gl.Volume(np.arange(2 * 3 * 256, dtype=np.int64).reshape(2, 3, 256).astype(np.uint8))
+    assert CT_8BIT_WINDOWS["ct_bone_8bit"] == (-500, 1300) and CT_8BIT_WINDOWS["ct_lung_8bit"] == (-1350, 150)
+    name, tf = inputs.resolve_tf("ct_8bit:-160,240", eight)          # the window the data was made with
+    assert name == "ct_8bit:-160,240" and tf.key() == ct_8bit_preset(eight, "ct_8bit", (-160, 240)).key()
+    assert tf.key() != inputs.PRESETS["ct_8bit"](eight).key()
+    name, tf = inputs.resolve_tf("ct-bone-8bit: -500 , 1300", eight)
+    assert name == "ct_bone_8bit: -500 , 1300" and tf.key() == inputs.PRESETS["ct_bone_8bit"](eight).key()
+    for spec, fragment in (("ct_8bit:", "two numbers LO,HI"), ("ct_8bit:-160", "two numbers LO,HI"),
+                           ("ct_8bit:a,b", "two numbers LO,HI"), ("ct_lung_8bit:1,2,3", "two numbers LO,HI"),
+                           ("ct_8bit:240,-160", "LO < HI"), ("ct_8bit:5,5", "LO < HI"),
+                           ("ct_bone_8bit:nan,300", "finite"), ("ct_8bit:-inf,300", "finite")):
+        with pytest.raises(InputError) as e:
+            inputs.resolve_tf(spec, eight)
+        assert e.value.field == "tf" and fragment in str(e.value) and repr(spec.partition(":")[2]) in str(e.value)
+    hu = dvr_gl.Volume(np.linspace(-1000, 2000, 24).reshape(2, 3, 4).astype(np.int16))
+    with pytest.raises(InputError) as e:
+        inputs.resolve_tf("ct_8bit", hu)
+    assert e.value.field == "tf" and "-1000..2000" in str(e.value) and "use ct" in str(e.value)
+    with pytest.raises(InputError, match="ct_8bit:LO,HI"):
+        inputs.resolve_tf("ct_8bits", eight)
+
+
+def test_auto_picks_the_8bit_ct_preset_from_the_modality():
+    """8-bit data is taken for windowed CT only when its metadata says CT: an MRI or a
+    microscope stack has most samples at 0 too."""
+    from dvr_gl.transfer import auto_preset_name
+    rng = np.random.default_rng(6)
+    samples = np.where(rng.random((8, 9, 10)) < 0.8, 0, rng.integers(1, 256, (8, 9, 10))).astype(np.uint8)
+    ct = dvr_gl.Volume(samples, modality="CT")
+    assert auto_preset_name(ct) == "ct_8bit" and auto_preset(ct).key() == inputs.PRESETS["ct_8bit"](ct).key()
+    assert inputs.resolve_tf(None, ct)[1].key() == inputs.PRESETS["ct_8bit"](ct).key()
+    unknown = dvr_gl.Volume(samples)
+    assert auto_preset_name(unknown) == "warm ramp"
+    assert auto_preset_name(dvr_gl.Volume(samples, modality="MR")) == "mr"
+    assert auto_preset_name(dvr_gl.Volume(samples, orientation="RAS")) == "mr"
+    assert auto_preset_name(dvr_gl.Volume(samples, modality="CT", orientation="RAS")) == "ct_8bit"
+    hu = dvr_gl.Volume(rng.integers(-1000, 1500, (8, 9, 10)).astype(np.int16), modality="CT")
+    assert auto_preset_name(hu) == "ct"                            # CT in HU: the HU preset
+    assert auto_preset_name(dvr_gl.Volume(samples.astype(np.float32), modality="CT")) == "warm ramp"
+    assert inputs.suitable_presets(ct)[:4] == ["auto", "ct_8bit", "ct_bone_8bit", "ct_lung_8bit"]
+    assert "ct_8bit" in inputs.suitable_presets(unknown)          # may be CT: offered, not chosen
+    assert "ct_8bit" not in inputs.suitable_presets(dvr_gl.Volume(samples, modality="MR"))
+    assert "ct_8bit" not in inputs.suitable_presets(hu) and "ct" in inputs.suitable_presets(hu)
+
+
+@pytest.mark.skipif(not os.path.isdir(SHARED_DATA), reason="the shared data folder is not beside the checkout")
+def test_the_shared_8bit_chest_ct_under_its_presets():
+    """LIDC2, a chest CT windowed to 0..255 (most samples clipped to 0): the plain 8-bit
+    preset leaves stored 0 (air, lungs) clear; under the usual soft-tissue window the HU
+    preset's skin veil would fill the box."""
+    from dvr_gl.transfer import ct_8bit_preset
+    vol, _ = inputs.load_input(os.path.join(SHARED_DATA, "vtkjs_lidc2_ct", "LIDC2_256x256x133_uint8.raw.gz"))
+    assert vol.data.dtype == np.uint8 and (vol.data == 0).mean() > 0.8
+    assert inputs.PRESETS["ct_8bit"](vol).opacity(0.0) == 0.0
+    assert ct_8bit_preset(vol, "ct_8bit", (-160, 240)).opacity(0.0) > 0.01
+    assert inputs.PRESETS["ct_bone_8bit"](vol).opacity(255.0) > 0.8       # bone, opaque
+
+
+# -- orientation given -----------------------------------------------------------------------
+
+def test_orientation_given_to_load_input_and_its_errors(tmp_path):
+    data = np.zeros((4, 5, 6), np.float32)
+    vol, _ = inputs.load_input(data, orientation="lps")
+    assert vol.orientation == "LPS"
+    again, _ = inputs.load_input(vol, orientation="RAS")
+    assert again.orientation == "RAS" and vol.orientation == "LPS" and np.array_equal(again.data, vol.data)
+    assert inputs.load_input(vol)[0] is vol
+    head, preset = inputs.load_input("builtin:ct_head", orientation="RPI")
+    assert head.orientation == "RPI" and preset == "ct_head"
+    np.save(tmp_path / "v.npy", data)
+    assert inputs.load_input(tmp_path / "v.npy", orientation="PIR")[0].orientation == "PIR"
+    pts = np.random.default_rng(1).random((10, 3))
+    mesh = dvr_gl.TetMesh.from_points(pts, pts[:, 0])
+    np.savez(tmp_path / "m.npz", points=mesh.points, tets=mesh.tets, s=mesh.scalars)
+    for source in (mesh, tmp_path / "m.npz"):
+        with pytest.raises(InputError) as e:
+            inputs.load_input(source, orientation="RAS")
+        assert e.value.field == "orientation" and "meshes" in str(e.value)
+    with pytest.raises(InputError) as e:
+        inputs.load_input(data, orientation="up")
+    assert e.value.field == "orientation" and "'up'" in str(e.value)
+
+
+def test_render_takes_an_orientation(renderer):
+    """``dvr_gl.render(..., orientation=)`` is the render of the volume with that
+    orientation: the first view in front of the face, the head up."""
+    data = np.random.default_rng(7).random((10, 12, 14)).astype(np.float32)
+    image = dvr_gl.render(data, size=32, orientation="RPI", tf="warm")
+    vol = dvr_gl.Volume(data, orientation="RPI")
+    scene = dvr_gl.Scene(vol, inputs.PRESETS["warm"](vol), inputs.first_camera(vol), 32, 32, shading=True)
+    np.testing.assert_array_equal(image, renderer.render(scene))
+    assert not np.array_equal(image, dvr_gl.render(data, size=32, tf="warm"))
+
+
+@pytest.mark.parametrize("left, right", [("RPS", "LPS"), ("LPI", "RPI"), ("LAS", "RAS"), ("PIL", "AIL")])
+def test_left_handed_data_is_not_drawn_mirrored(renderer, left, right):
+    """A head whose index axes form a left-handed anatomical frame cannot be shown the
+    right way round by any camera: the loaders reverse its x axis. The same anatomy
+    stored both ways (x reversed, the x letter swapped) then loads as the same volume and
+    renders the same picture; without the reversal the two are mirror images (the
+    asymmetric phantom makes sure they differ)."""
+    rng = np.random.default_rng(3)
+    stored = rng.random((9, 10, 11)).astype(np.float32)
+    stored[2:5, 3:6, 7:10] += 2.0                      # a blob on one side only
+    mirrored = np.ascontiguousarray(stored[:, :, ::-1])
+    a, _ = inputs.load_input(stored, orientation=right)
+    b, _ = inputs.load_input(mirrored, orientation=left)
+    assert a.orientation == right and b.orientation == right
+    np.testing.assert_array_equal(a.data, b.data)
+    images = [dvr_gl.render(v, size=32, tf="warm") for v in (a, b)]
+    np.testing.assert_array_equal(images[0], images[1])
+    raw = dvr_gl.Volume(mirrored, orientation=left)       # the mirror image the loaders avoid
+    assert np.abs(dvr_gl.render(raw, size=32, tf="warm") - images[0]).max() > 0.05
+
+
+@pytest.mark.skipif(not os.path.isdir(SHARED_DATA), reason="the shared data folder is not beside the checkout")
+def test_a_file_with_a_left_handed_orientation_loads_reversed_in_x():
+    from dvr_gl import io
+    path = os.path.join(SHARED_DATA, "vtk_headsq_quarter", "quarter.nhdr")
+    plain = io.load_volume(path, orientation="RPI")         # right-handed: as stored
+    given = io.load_volume(path, orientation="LPI")
+    assert plain.orientation == "RPI" and given.orientation == "RPI"
+    np.testing.assert_array_equal(given.data, plain.data[:, :, ::-1])
+    assert io.right_handed(plain.data, "LPS")[0] is plain.data          # right-handed: untouched

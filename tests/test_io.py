@@ -14,8 +14,8 @@ from PIL import Image
 
 import dvr_gl
 from dvr_gl import data
-from dvr_gl.io import (InputError, MissingFileError, load_volume, parse_size, parse_triplet, save_png,
-                       to_png_array)
+from dvr_gl.io import (InputError, MissingFileError, load_volume, parse_orientation, parse_size, parse_triplet,
+                       save_png, to_png_array)
 
 SHARED = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), os.pardir, "shared", "data")
 HEADSQ = os.path.join(SHARED, "vtk_headsq_quarter")
@@ -287,14 +287,27 @@ def test_nrrd_rotated_directions_warn_and_use_lengths(tmp_path):
     with pytest.warns(UserWarning, match="space directions"):
         v = load_volume(p)
     assert np.allclose(v.spacing, [2, 3, 4])
-    assert v.orientation == "RAI"    # each axis named by its vector's largest component and sign
+    # each axis named by its vector's largest component and sign: RAI, a left-handed frame,
+    # so the x axis is reversed on loading (io.right_handed) and named L
+    assert v.orientation == "LAI"
 
 
-def test_nrrd_without_an_anatomical_space_has_no_orientation(tmp_path):
-    p = tmp_path / "plain.nrrd"
-    nrrd.write(str(p), np.zeros((2, 2, 2), np.uint8), {"space": "3D-left-handed", "spacings": [1, 1, 1]},
-               index_order="C")
-    assert load_volume(p).orientation is None
+def test_nrrd_without_an_anatomical_space_takes_the_dicom_convention_as_assumed(tmp_path):
+    """A 3D-right-handed or 3D-left-handed space names no anatomy: the axes are read as
+    DICOM lays out a slice (x to the patient's left, y to the back), z by the handedness
+    (LPS, LPI; a left-handed frame is then loaded with x reversed), marked as assumed;
+    without a space there is no orientation."""
+    data = np.arange(24, dtype=np.uint8).reshape(2, 3, 4)
+    for space, codes, flipped in (("3D-right-handed", "LPS", False), ("3D-left-handed", "RPI", True)):
+        p = tmp_path / "plain.nrrd"
+        nrrd.write(str(p), data, {"space": space, "spacings": [1, 1, 1]}, index_order="C")
+        v = load_volume(p)
+        assert v.orientation == codes and v.orientation_assumed
+        assert np.array_equal(v.data, data[:, :, ::-1] if flipped else data)
+        given = load_volume(p, orientation="RAS")
+        assert given.orientation == "RAS" and not given.orientation_assumed
+    nrrd.write(str(tmp_path / "none.nrrd"), data, {"spacings": [1, 1, 1]}, index_order="C")
+    assert load_volume(tmp_path / "none.nrrd").orientation is None
 
 
 @pytest.mark.skipif(not os.path.isdir(HEADSQ), reason="shared test data not present")
@@ -303,7 +316,9 @@ def test_headsq_detached_multifile_nhdr_matches_readme_recipe():
                     for i in range(1, 94)])
     v = load_volume(os.path.join(HEADSQ, "quarter.nhdr"))
     assert v.shape == (93, 64, 64) and v.data.dtype == np.int16
-    assert np.array_equal(v.data, ref)
+    # its space is 3D-left-handed: read as LPI (assumed), a left-handed frame, so x is reversed
+    assert v.orientation == "RPI" and v.orientation_assumed
+    assert np.array_equal(v.data, ref[:, :, ::-1])
     assert v.spacing.tolist() == [3.2, 3.2, 1.5] and v.origin.tolist() == [0, 0, 0]
     assert v.data_range == (0.0, 3926.0)
 
@@ -469,6 +484,96 @@ def test_metaimage_headmr_matches_readme_recipe():
     ref = np.fromfile(os.path.join(HEADMR, "HeadMRVolume.raw"), dtype=np.uint8).reshape(42, 62, 48)
     v = load_volume(os.path.join(HEADMR, "HeadMRVolume.mhd"))
     assert np.array_equal(v.data, ref) and v.spacing.tolist() == [4, 4, 4]
+    # its header says neither: ITK's reading, the identity in LPS, assumed
+    assert v.orientation == "LPS" and v.orientation_assumed and v.modality is None
+    assert load_volume(os.path.join(HEADMR, "HeadMRVolume.mhd"), orientation="LPS").orientation == "LPS"
+
+
+def _mhd(tmp_path, *extra):
+    """A 4x3x2 uint8 MetaImage with the header lines ``extra``; returns its path."""
+    np.arange(24, dtype=np.uint8).tofile(tmp_path / "o.raw")
+    p = tmp_path / "o.mhd"
+    p.write_text("ObjectType = Image\nNDims = 3\n" + "".join(line + "\n" for line in extra)
+                 + "DimSize = 4 3 2\nElementType = MET_UCHAR\nElementDataFile = o.raw\n")
+    return p
+
+
+@pytest.mark.parametrize("written, codes", [
+    ("RAI", "LPS"),      # ITK's identity direction: x from right to left, y from anterior, z from inferior
+    ("LPS", "LAI"),      # RAI, left-handed: loaded with x reversed (io.right_handed)
+    ("LPI", "RAS"), ("rai", "LPS"), ("AIR", "PSL"),
+    ("???", None), ("RA?", None), ("RLS", None), ("RAIS", None),
+    ("", "LPS"),         # nothing said: ITK's identity in LPS (assumed)
+])
+def test_metaimage_anatomical_orientation_is_read_in_itks_from_letters(tmp_path, written, codes):
+    """MetaIO writes AnatomicalOrientation with the letter each axis comes *from*; dvr_gl's
+    orientation names where it points (nibabel's convention). Unknown or malformed: none."""
+    assert load_volume(_mhd(tmp_path, f"AnatomicalOrientation = {written}")).orientation == codes
+
+
+def test_metaimage_transform_matrix_gives_the_orientation(tmp_path):
+    """TransformMatrix rows are the index axes' direction cosines in ITK's LPS world; one
+    other than the identity decides (with a warning that the volume stays axis-aligned),
+    an identity one leaves it to AnatomicalOrientation."""
+    identity = "TransformMatrix = 1 0 0 0 1 0 0 0 1"
+    alone = load_volume(_mhd(tmp_path, identity))
+    assert alone.orientation == "LPS" and alone.orientation_assumed      # as ITK reads it
+    assert not load_volume(_mhd(tmp_path, identity, "AnatomicalOrientation = RAI")).orientation_assumed
+    assert load_volume(_mhd(tmp_path, identity, "AnatomicalOrientation = RAI")).orientation == "LPS"
+    with pytest.warns(UserWarning, match="not the identity"):
+        # x along -L (right), y along -P (anterior), z along S: RAS, whatever the letters say
+        v = load_volume(_mhd(tmp_path, "TransformMatrix = -1 0 0 0 -1 0 0 0 1", "AnatomicalOrientation = RAI"))
+    assert v.orientation == "RAS"
+    with pytest.warns(UserWarning, match="not the identity"):   # x to posterior, y superior, z left
+        assert load_volume(_mhd(tmp_path, "Rotation = 0 1 0 0 0 1 1 0 0")).orientation == "PSL"
+    with pytest.warns(UserWarning, match="not the identity"):   # an oblique axis names no direction
+        c = np.sqrt(0.5)
+        assert load_volume(_mhd(tmp_path, f"TransformMatrix = {c} {c} 0 {-c} {c} 0 0 0 1")).orientation is None
+    for bad in ("1 0 0 0 1 0 0 0", "1 0 0 0 1 0 0 0 x", "1 0 0 0 1 0 0 0 nan"):
+        with pytest.raises(InputError) as e:
+            load_volume(_mhd(tmp_path, f"TransformMatrix = {bad}"))
+        assert e.value.field == "TransformMatrix" and bad in str(e.value)
+
+
+@pytest.mark.parametrize("written, modality", [
+    ("MET_MOD_CT", "CT"), ("MET_MOD_MR", "MR"), ("MET_MOD_US", "US"), ("MET_MOD_OTHER", "OT"),
+    ("MET_MOD_UNKNOWN", None), ("SOMETHING", None), (None, None),
+])
+def test_metaimage_modality(tmp_path, written, modality):
+    extra = () if written is None else (f"Modality = {written}",)
+    assert load_volume(_mhd(tmp_path, *extra)).modality == modality
+
+
+def test_nrrd_modality_key_value(tmp_path):
+    p = tmp_path / "m.nrrd"
+    nrrd.write(str(p), np.zeros((2, 2, 2), np.uint8), {"space": "left-posterior-superior"},
+               custom_field_map=None, index_order="C")
+    assert load_volume(p).modality is None
+    p.write_bytes(p.read_bytes().replace(b"space: left-posterior-superior\n",
+                                         b"space: left-posterior-superior\nmodality:=ct\n"))
+    assert load_volume(p).modality == "CT"
+
+
+def test_orientation_given_replaces_or_supplies_the_files(tmp_path):
+    plain = tmp_path / "plain.nrrd"
+    nrrd.write(str(plain), np.zeros((2, 2, 2), np.uint8), {"space": "3D-left-handed", "spacings": [1, 1, 1]},
+               index_order="C")
+    assert load_volume(plain).orientation_assumed                                  # the convention
+    assert load_volume(plain, orientation="lps").orientation == "LPS"             # replaced
+    assert load_volume(plain, orientation="lpi").orientation == "RPI"             # left-handed: x reversed
+    lps = tmp_path / "lps.nrrd"
+    nrrd.write(str(lps), np.zeros((2, 2, 2), np.uint8), {"space": "left-posterior-superior"}, index_order="C")
+    assert load_volume(lps, orientation=" RAS ").orientation == "RAS"            # replaced
+    np.save(tmp_path / "a.npy", np.zeros((2, 2, 2), np.float32))
+    assert load_volume(tmp_path / "a.npy", orientation="SAL").orientation == "SAL"
+    for bad in ("XYZ", "RAL", "RA", "RASS", 3):
+        with pytest.raises(InputError) as e:
+            load_volume(lps, orientation=bad)
+        assert e.value.field == "orientation" and repr(bad) in str(e.value)
+    assert parse_orientation("pir") == "PIR"
+    with pytest.raises(InputError) as e:
+        parse_orientation("LRS", "--orientation")
+    assert e.value.field == "--orientation" and "one each of R/L, A/P and S/I" in str(e.value)
 
 
 # ============================================================================ PNG
@@ -705,7 +810,9 @@ def test_nifti_through_nibabel(tmp_path):
     flipped[0, 0] = -1.0     # x runs to the left: the camera still finds the face
     nib.save(nib.Nifti1Image(xyz, flipped), str(tmp_path / "f.nii"))
     with pytest.warns(UserWarning, match="axis-aligned"):
-        assert load_volume(tmp_path / "f.nii").orientation == "LAS"
+        left = load_volume(tmp_path / "f.nii")
+    # LAS (radiological storage) is a left-handed frame: x is reversed so no view is a mirror image
+    assert left.orientation == "RAS" and np.array_equal(left.data, np.transpose(xyz, (2, 1, 0))[:, :, ::-1])
     rotated = affine.copy()
     rotated[:3, :3] = [[0, -2.0, 0], [1.0, 0, 0], [0, 0, 3.0]]
     nib.save(nib.Nifti1Image(xyz, rotated), str(tmp_path / "r.nii"))
@@ -803,6 +910,8 @@ def test_dicom_series_sorted_rescaled_and_oriented(tmp_path):
     assert v.data.dtype == np.int16 and np.array_equal(v.data, hu)       # sorted by position, in HU
     assert np.allclose(v.spacing, [0.7, 0.8, 2.5]) and np.allclose(v.origin, [-100, -120, 30])
     assert v.orientation == "LPS"                                       # DICOM's patient axes
+    assert v.modality == "CT"                                           # the Modality tag
+    assert load_volume(tmp_path / "ct", orientation="ras").orientation == "RAS"   # given: replaces it
     one = load_volume(tmp_path / "ct" / "im002.dcm")                    # one file: its whole series
     assert np.array_equal(one.data, hu)
     # another series in the folder is left out, with a warning

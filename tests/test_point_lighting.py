@@ -66,15 +66,16 @@ def test_lit_particles_match_the_reference(renderer, scene):
 
 @pytest.mark.parametrize("scene", ["head", "head_lights", "ball"])
 def test_lit_splats_match_the_reference(renderer, scene):
-    """test_splat's bound on the splats' opacities, times the brightest lit colour, plus
-    the lighting's own float32 error (the splats' weights add up to at most 1)."""
+    """test_splat's bound for the kernel (the tent's per pixel, the Gaussian splats'
+    opacities), times the brightest lit colour, plus the lighting's own float32 error (the
+    sheets' or splats' weights add up to at most 1)."""
     scene = {"head": head_scene, "head_lights": lambda: head_scene(lights=LIGHTS), "ball": ball_scene}[scene]()
     gl = renderer.render(scene, technique="splat")
     ref = reference.render(scene, technique="splat")
     plan = get_technique("splat").make_plan(scene)
     assert ref[..., 3].max() > 0.1
     assert metrics.max_abs_error(gl, renderer.render(scene.replace(shading=False), technique="splat")) > 0.05
-    assert metrics.max_abs_error(gl, ref) <= splat_bound(scene, plan) * brightest(scene) + lighting_error(scene)
+    assert np.all(np.abs(gl - ref) <= splat_bound(scene, plan) * brightest(scene) + lighting_error(scene))
 
 
 def linear_blocks(slope=5.0):
@@ -131,13 +132,20 @@ def test_lit_particles_converge_to_the_exact_lit_image(renderer):
     assert errors[1] < 0.5 * errors[0], errors
 
 
-def test_lit_splats_are_as_close_to_the_exact_lit_image_as_unlit_ones_to_theirs(renderer):
-    """Lighting adds no error of its own to splatting beyond its kernel's: lit against the
-    exact lit image within 1.5x of unlit against the exact unlit image."""
+def test_lit_splats_add_no_error_of_their_own(renderer):
+    """Lighting adds no error of its own to splatting. The tent's lit sheets are the lit
+    midpoint rule at the sheets' distance: against the exact lit image within 1.1x of the
+    ray caster at that step (a lit integrand varies more than an unlit one, so both
+    errors are about three times their unlit ones). The Gaussian kernel's blur dominates
+    both its errors: lit within 1.5x of unlit."""
     scene = head_scene(w=48, h=48)
-    lit = metrics.rmse(renderer.render(scene, technique="splat"), reference.exact(scene))
+    exact = reference.exact(scene)
+    tent = metrics.rmse(renderer.render(scene, technique="splat"), exact)
+    ray = metrics.rmse(renderer.render(scene, technique="raycast", step=scene.volume.min_spacing), exact)
+    assert tent <= 1.1 * ray, (tent, ray)
+    lit = metrics.rmse(renderer.render(scene, technique="splat", kernel="gaussian"), exact)
     plain = scene.replace(shading=False)
-    unlit = metrics.rmse(renderer.render(plain, technique="splat"), reference.exact(plain))
+    unlit = metrics.rmse(renderer.render(plain, technique="splat", kernel="gaussian"), reference.exact(plain))
     assert lit <= 1.5 * unlit, (lit, unlit)
 
 

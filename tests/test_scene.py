@@ -274,3 +274,13 @@ def test_volume_orientation_and_its_frame():
     front, up = anatomical_frame(v)
     assert front.tolist() == [0, -1, 0] and up.tolist() == [0, 0, -1]
     assert v.digest() == dvr_gl.Volume(DATA).digest()   # it changes no image, only the first view
+
+
+def test_volume_modality_is_a_short_code_or_none():
+    assert dvr_gl.Volume(DATA).modality is None
+    assert dvr_gl.Volume(DATA, modality=" ct ").modality == "CT"
+    assert dvr_gl.Volume(DATA, modality="MR").digest() == dvr_gl.Volume(DATA).digest()   # metadata only
+    for bad in ("", "   ", "C-T", "X" * 17, 3, b"CT", "é"):
+        with pytest.raises(ValueError, match="modality must be a code such as 'CT'") as e:
+            dvr_gl.Volume(DATA, modality=bad)
+        assert repr(bad) in str(e.value)

@@ -10,7 +10,7 @@ import dvr_gl
 from dvr_gl import data as bundled
 from dvr_gl import metrics, reference
 from dvr_gl.phantoms import marschner_lobb, marschner_lobb_tf
-from dvr_gl.tolerance import MAX_STEP, SAFETY, error_model
+from dvr_gl.tolerance import MAX_STEP, SAFETY, ErrorModel, error_model, measure
 
 from test_shading import RAMP, TF, cameras
 
@@ -43,7 +43,8 @@ def test_the_chosen_step_meets_the_tolerance_and_is_not_needlessly_fine(renderer
     assert choice.step_voxels >= 0.5 * max(meets), (choice, max(meets))
 
 
-def test_the_pilot_is_reused_and_the_choice_is_readable(renderer):
+def test_the_pilot_is_reused_and_the_choice_is_readable(renderer, monkeypatch):
+    import dvr_gl.tolerance as tol
     scene = scenes()["marschner_lobb"]
     renderer.render(scene, tolerance=2e-3)
     first = renderer.last_choice
@@ -52,9 +53,14 @@ def test_the_pilot_is_reused_and_the_choice_is_readable(renderer):
     assert first.tolerance == 2e-3 and first.predicted_rmse <= SAFETY * 2e-3 * (1 + 1e-12)
     assert first.step == pytest.approx(first.step_voxels * scene.volume.min_spacing)
     assert max(first.pilot_size) <= 64 and 1.0 <= first.order <= 3.0
+
+    def no_new_pilot(*args):
+        raise AssertionError("the pilot was measured again")
+
+    monkeypatch.setattr(tol, "measure", no_new_pilot)
     renderer.render(scene, tolerance=2e-4)
     finer = renderer.last_choice
-    assert finer.step < first.step and finer.pilot_seconds == first.pilot_seconds   # the pilot reused
+    assert finer.step < first.step and finer.pilot_seconds >= first.pilot_seconds
 
 
 def test_an_empty_image_takes_the_largest_step(renderer):
@@ -100,3 +106,60 @@ def test_a_narrow_tf_feature_is_pre_integrated(renderer):
     renderer.render(scene, tolerance=2e-2, preintegrate=False)      # the caller's say is kept
     plain = renderer.last_choice
     assert not plain.preintegrate and plain.step_voxels * 2.5 < choice.step_voxels
+
+
+def test_the_model_measures_each_pilot_step_against_the_richardson_image():
+    """Pilot images that converge as exact + c h^2 + d h^3: the order read off the finest
+    pair is near 2, the Richardson image removes the h^2 term, and each pilot step's error
+    is measured against it; predictions interpolate those errors, never fall as the step
+    grows, and largest_step inverts predict."""
+    exact = np.linspace(0.0, 1.0, 64).reshape(8, 8)
+    shape = np.cos(np.arange(64)).reshape(8, 8)
+
+    def render(scene, h):
+        return exact + 1e-3 * h ** 2 * shape + 4e-4 * h ** 3 * shape
+
+    scene = scenes()["marschner_lobb"]
+    model = measure(lambda s, step: render(s, step / scene.volume.min_spacing), scene)
+    assert 2.0 <= model.order <= 2.3
+    truth = [np.sqrt(np.mean((render(None, k) - exact) ** 2)) for k in model.steps]
+    for k, measured, true in zip(model.steps, model.errors, truth):
+        assert model.predict(k) == pytest.approx(measured, rel=1e-12)
+        assert measured == pytest.approx(true, rel=0.25)      # the Richardson image is near exact
+    for e in (1e-5, 3e-4, 2e-3, 1e-2):
+        assert model.predict(model.largest_step(e)) == pytest.approx(e, rel=1e-9)
+    steps = np.geomspace(1 / 64, 2, 40)
+    assert np.all(np.diff([model.predict(k) for k in steps]) >= 0)
+    flat = ErrorModel(order=2.0, steps=(1.0, 0.5, 0.25, 0.125), errors=(0.0,) * 4, pilot_size=(8, 8),
+                      pilot_seconds=0.0)
+    assert flat.predict(1.0) == 0.0
+
+
+def test_an_interpolated_step_is_checked_on_the_pilot():
+    """The error between the pilot's octaves need not follow the curve through them: a
+    pilot whose error jumps just above 1 voxel. The first step chosen (interpolated) is
+    rendered, found over SAFETY * E, and the step returned is one whose measured error is
+    within it; asking again renders nothing."""
+    exact = np.zeros((8, 8))
+
+    def error_at(k):
+        return 1e-3 * k ** 2 if k <= 1.0 else 5e-3       # a jump past one voxel
+
+    calls = []
+
+    def render(scene, step):
+        k = step / voxel
+        calls.append(k)
+        return exact + error_at(k)
+
+    scene = scenes()["marschner_lobb"]
+    voxel = scene.volume.min_spacing
+    from dvr_gl.tolerance import verified
+    model = measure(render, scene)
+    assert model.predict(1.3) < SAFETY * 3e-3          # the curve alone would take ~1.3 voxel
+    calls.clear()
+    model, choice = verified(model, render, scene, 3e-3)
+    assert calls and error_at(choice.step_voxels) <= SAFETY * 3e-3
+    assert choice.step_voxels >= 1.0 - 1e-9             # and not finer than needed
+    calls.clear()
+    assert verified(model, render, scene, 3e-3)[1] == choice and not calls

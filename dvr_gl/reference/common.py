@@ -189,6 +189,35 @@ def blend_over(dst, src, target="rgba32f"):
     return round_to_target(src + (1 - src[..., 3:4]) * dst, target)
 
 
+def blend_under(dst, src, target="rgba32f"):
+    """Fixed-function blending ``ONE_MINUS_DST_ALPHA, ONE`` of premultiplied ``src``
+    (..., 4) onto ``dst`` drawn in front of it (front to back: the over operator with
+    the new fragment behind), rounded to the target's format as ``blend_over`` does."""
+    if target == "rgba32f":
+        return dst + (1 - dst[..., 3:4]) * src
+    src = round_to_target(src, target)
+    return round_to_target(dst + (1 - dst[..., 3:4]) * src, target)
+
+
+def plane_inside(k, count, t, t0, t1):
+    """Whether plane ``k`` of ``count`` (met at ray distances ``t``) exists and meets the
+    rays inside the box [t0, t1], in front of their start (GLSL ``sliceInside``)."""
+    t = np.asarray(t, np.float64)
+    if k < 0 or k >= count:
+        return np.zeros(t.shape, bool)
+    return (t > 0) & (t >= t0) & (t <= t1)
+
+
+def slab_segment(k, count, t, t_near, t_far, t0, t1):
+    """The piece [a, b] of each ray that plane ``k`` (met at ``t``) stands for: from
+    halfway to plane k + 1 (met at ``t_near``) to halfway to plane k - 1 (``t_far``), or
+    to the box's entry ``t0`` or exit ``t1`` where that neighbour does not meet the ray
+    inside it (GLSL ``slabSegment``)."""
+    a = np.where(plane_inside(k + 1, count, t_near, t0, t1), 0.5 * (t_near + t), t0)
+    b = np.where(plane_inside(k - 1, count, t_far, t0, t1), 0.5 * (t + t_far), t1)
+    return a, b
+
+
 MAX_CHORD_SEGMENTS = 4096  # as shaders/common/slice_gap.glsl
 
 

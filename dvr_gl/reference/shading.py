@@ -20,14 +20,26 @@ def gradient(volume, values, points):
     return g
 
 
-def sample_gradients(volume, values):
+def sample_gradients(volume, values, at=None):
     """The gradient at every sample, (nz, ny, nx, 3) in x, y, z order: what the
-    ``gradients="texture"`` option uploads.
+    ``gradients="texture"`` option uploads; with ``at`` ((N, 3) integer sample indices,
+    x, y, z), only at those samples, (N, 3).
 
     Its trilinear interpolant equals ``gradient`` everywhere, not only at samples: along
     x, f(p + sx) - f(p - sx) interpolates the differences v[i+1] - v[i-1] and v[i+2] - v[i]
     of the two samples around p with the same weights as f itself, and at the edges the
     clamped points read the edge sample, as ``v[-1] -> v[0]`` does here."""
+    if at is not None:
+        at = np.asarray(at, np.int64)
+        g = np.empty(at.shape, np.float64)
+        upper = np.array(values.shape[::-1]) - 1          # x, y, z
+        for axis in range(3):
+            ahead, behind = at.copy(), at.copy()
+            ahead[:, axis] = np.minimum(at[:, axis] + 1, upper[axis])
+            behind[:, axis] = np.maximum(at[:, axis] - 1, 0)
+            g[:, axis] = (values[ahead[:, 2], ahead[:, 1], ahead[:, 0]]
+                          - values[behind[:, 2], behind[:, 1], behind[:, 0]]) / (2 * volume.spacing[axis])
+        return g
     g = np.empty(values.shape + (3,), np.float64)
     for axis in range(3):
         array_axis = 2 - axis                   # values are (z, y, x)

@@ -8,7 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .common import blend_over, box_rays, cell_is_valid, gap_pass, segment_colors, trilinear, world_to_index
+from .common import (blend_over, box_rays, cell_is_valid, gap_pass, plane_inside, segment_colors, slab_segment,
+                     trilinear, world_to_index)
 from .shading import ray_lighting
 
 
@@ -26,9 +27,7 @@ def render_plan(plan, lut_exact=False):
         return np.full(len(o), depth) if plan.shells else depth / cos_theta
 
     def inside(k, t):
-        if k < 0 or k >= plan.count:
-            return np.zeros(len(o), bool)
-        return (t > 0) & (t >= t0) & (t <= t1)
+        return plane_inside(k, plan.count, t, t0, t1)
 
     acc = np.zeros((len(o), 4))
     for k in range(plan.count):  # far to near
@@ -51,8 +50,7 @@ def render_plan(plan, lut_exact=False):
         light = ray_lighting(scene, values, oo, dd)
 
         if plan.preint is None:
-            a = np.where(near_in, 0.5 * (t_near + tk), r0)
-            b = np.where(far_in, 0.5 * (tk + t_far), r1)
+            a, b = slab_segment(k, plan.count, tk, t_near, t_far, r0, r1)
             src = segment_colors(plan, sample, valid, a, b, lut_exact, light)
         else:
             src = segment_colors(plan, sample, valid, tk, np.where(far_in, t_far, r1), light=light)

@@ -1,23 +1,124 @@
-"""NumPy reference of splatting: the plan's splats in the plan's order, each one's
-kernel integrated along every pixel-centre ray near it (float64, the same closed form
-as the shader), composited with the over operator.
+"""NumPy reference of splatting, both kernels, following the plan (float64).
 
-The over operator is associative, so the per-pixel sequence is composited at once: with
-the splats of a pixel listed front to back, each one's colour is weighted by the product
-of ``1 - alpha`` of those in front (a segmented cumulative sum of ``log(1 - alpha)``).
+The tent kernel: the plan's sheets, front to back. On each, every pixel's ray meets the
+sheet at ``p``; the sheet buffer's sums there are the tent weights of the splatted
+samples around ``p`` (the corners of its cell that the plan splats: no other tent reaches
+it) times their values, their gradients and their non-finite flags, summed as GL's
+additive blending does; the value ``sum w v / sum w`` is classified with the plan's table,
+lit, given the piece of the ray the sheet stands for and blended under the image.
+
+The Gaussian kernel: the plan's splats in the plan's order, each one's kernel integrated
+along every pixel-centre ray near it (float64, the same closed form as the shader),
+composited with the over operator. The over operator is associative, so the per-pixel
+sequence is composited at once: with the splats of a pixel listed front to back, each
+one's colour is weighted by the product of ``1 - alpha`` of those in front (a segmented
+cumulative sum of ``log(1 - alpha)``).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from .common import blend_under, box_rays, plane_inside, segment_of, slab_segment
 from .particles import lit_colors
 from .sprites import sprite_pixel_pairs
 
 
 def render_plan(plan, lut_exact=False):
-    """(H, W, 4) float64 premultiplied RGBA, row 0 on top. ``lut_exact`` is accepted for
-    the common interface: the samples are classified with the exact TF anyway."""
+    """(H, W, 4) float64 premultiplied RGBA, row 0 on top. ``lut_exact``: the tent's
+    sheets are classified with the exact TF instead of the plan's table (the Gaussian
+    kernel's samples are classified with the exact TF anyway)."""
+    if plan.kernel == "tent":
+        return _render_tent(plan, lut_exact)
+    return _render_gaussian(plan)
+
+
+def sheet_sums(plan, points, values=None):
+    """The sheet buffer at ``points`` (n, 3) relative to the data's lower corner: per
+    point the sums over the splatted samples of ``w``, ``w v``, ``w`` of the non-finite
+    ones and ``w g`` (None when unlit), ``w`` the sample's tent there. ``values``: the
+    splatted samples' values in float64 (made here when not given)."""
+    volume = plan.scene.volume
+    samples = plan.samples
+    nx, ny, nz = volume.dims
+    idx = np.asarray(points, np.float64) / volume.spacing
+    base = np.clip(np.floor(idx).astype(np.int64), 0, np.array([nx - 2, ny - 2, nz - 2]))
+    slot = np.full(samples.mask.shape, -1, np.int64)          # sample -> its row in the plan
+    slot[samples.mask] = np.arange(samples.count)
+    weight = np.zeros(len(idx))
+    value = np.zeros(len(idx))
+    bad = np.zeros(len(idx))
+    grad = None if plan.gradients is None else np.zeros((len(idx), 3))
+    if values is None:
+        values = volume.values(np.float64)[samples.mask]
+    for corner in ((x, y, z) for z in (0, 1) for y in (0, 1) for x in (0, 1)):
+        c = base + np.array(corner)
+        w = np.prod(np.maximum(1.0 - np.abs(idx - c), 0.0), axis=1)
+        row = slot[c[:, 2], c[:, 1], c[:, 0]]
+        drawn = (row >= 0) & (w > 0)
+        w, row = np.where(drawn, w, 0.0), np.maximum(row, 0)
+        finite = samples.finite[row]
+        weight += np.where(finite, w, 0.0)
+        value += np.where(finite, w * values[row], 0.0)
+        bad += np.where(finite, 0.0, w)
+        if grad is not None:
+            grad += np.where(finite, w, 0.0)[:, None] * plan.gradients[row].astype(np.float64)
+    return weight, value, bad, grad
+
+
+def _render_tent(plan, lut_exact):
+    scene = plan.scene
+    H, W = scene.height, scene.width
+    o, d, t0, t1 = box_rays(scene)
+    cos_theta = d @ scene.camera.forward
+    sheets = plan.sheets
+    terms = None
+    if plan.gradients is not None:
+        from .shading import SampleTerms
+        terms = SampleTerms(scene, None)
+    if lut_exact:
+        tf = scene.tf
+
+        def classify(s):
+            return np.concatenate([tf.color(s), tf.opacity(s)[..., None]], axis=-1), 1 - tf.opacity(s)
+    else:
+        def classify(s):
+            return plan.lut.lookup(s), plan.lut.lookup_transparency(s)
+    acc = np.zeros((len(o), 4))
+    values = scene.volume.values(np.float64)[plan.samples.mask]
+
+    def t_of(k):
+        return (sheets.far_depth - k * sheets.spacing) / cos_theta
+
+    for k in range(sheets.count - 1, -1, -1):        # front to back
+        if sheets.ranges[k, 1] == 0:
+            continue
+        t = t_of(k)
+        rows = np.nonzero(plane_inside(k, sheets.count, t, t0, t1))[0]
+        if rows.size == 0:
+            continue
+        tk = t[rows]
+        points = o[rows] + tk[:, None] * d[rows]
+        weight, value, bad, grad = sheet_sums(plan, points, values)
+        seen = (weight > 0) & (bad <= 0)
+        rows, tk, points = rows[seen], tk[seen], points[seen]
+        s = value[seen] / weight[seen]
+        a, b = slab_segment(k, sheets.count, tk, t_of(k + 1)[rows], t_of(k - 1)[rows], t0[rows], t1[rows])
+        rgba, clear = classify(s)
+        length = (b - a) / scene.tf.unit_distance
+        if terms is not None:
+            g = grad[seen] / weight[seen][:, None]
+            factor, offset, scale = terms.at(points + scene.volume.bounds[0], d[rows], grad=g)
+            lit = rgba[:, 3] > 0
+            rgba[:, :3] = np.where(lit[:, None], rgba[:, :3] * factor[:, None] + offset, rgba[:, :3])
+            length = np.where(lit, length * scale, length)
+        src = segment_of(rgba, clear, length)
+        drawn = np.any(src != 0, axis=1)       # GL discards all-zero fragments
+        acc[rows[drawn]] = blend_under(acc[rows[drawn]], src[drawn], plan.target)
+    return acc.reshape(H, W, 4)
+
+
+def _render_gaussian(plan):
     scene = plan.scene
     W, H = scene.width, scene.height
     order = plan.order

@@ -19,9 +19,14 @@ def names():
 
 def for_scene(scene):
     """The names of the techniques that can render ``scene`` (its data and its mode)."""
-    kind = "mesh" if scene.is_mesh else "volume"
+    return for_data(scene.volume, scene.mode)
+
+
+def for_data(data, mode="composite"):
+    """The names of the techniques that render ``data`` (a Volume or a TetMesh) in ``mode``."""
+    kind = "mesh" if getattr(data, "n_tets", None) is not None else "volume"
     return tuple(n for n in _MODULES
-                 if scene.mode in get_technique(n).MODES and kind in _kinds(get_technique(n).DATA))
+                 if mode in get_technique(n).MODES and kind in _kinds(get_technique(n).DATA))
 
 
 def _kinds(data):

@@ -263,10 +263,11 @@ def sample_term_uniforms(renderer, scene, defines):
     return out
 
 
-def bind(prog, textures, uniforms):
-    """Bind ``textures`` (sampler name -> texture) to consecutive units and set the
+def bind(prog, textures, uniforms, first_unit=0):
+    """Bind ``textures`` (sampler name -> texture) to consecutive units from
+    ``first_unit`` (two programs drawn in turn take units of their own) and set the
     uniforms the program has (the compiler drops those a variant does not use)."""
-    for unit, (name, tex) in enumerate(textures.items()):
+    for unit, (name, tex) in enumerate(textures.items(), start=first_unit):
         tex.use(location=unit)
         if name in prog:
             prog[name].value = unit
@@ -345,6 +346,44 @@ def data_projection(scene):
     return eye_view_projection(scene, near, far)
 
 
+INFLATE = 1e-3  # slice and sheet polygons are cut from the box grown by this fraction of its diagonal
+
+
+def inflated_corners(volume):
+    """The corners of the volume's box grown by ``INFLATE`` of its diagonal on every side:
+    the slicing techniques' polygons cover every pixel whose ray meets a plane inside the
+    box, and their fragments decide coverage themselves."""
+    from .proxy import box_corners
+    margin = INFLATE * float(np.linalg.norm(volume.extent))
+    return box_corners(np.full(3, -margin), volume.extent + margin)
+
+
+def plane_triangles(scene, far_depth, step, count):
+    """The planes perpendicular to the view at depths ``far_depth - k * step`` (k <
+    ``count``) cut against the slightly grown box, as fan triangles drawn plane by plane:
+    (positions (n, 3) float32, each vertex's plane index (n,) int32, and per plane its
+    first vertex and vertex count (count, 2))."""
+    from . import proxy
+    cam = scene.camera
+    offsets = proxy.plane_offsets(cam.forward, cam.eye - scene.volume.bounds[0], far_depth, step, count)
+    vertices, counts = proxy.plane_polygons(inflated_corners(scene.volume), cam.forward, offsets)
+    positions, planes = proxy.fan_triangles(vertices, counts)
+    per_plane = 3 * np.maximum(counts - 2, 0)
+    starts = np.concatenate([[0], np.cumsum(per_plane)[:-1]])
+    return positions, planes, np.stack([starts, per_plane], axis=1)
+
+
+def plane_projection(plan):
+    """View-projection whose near and far planes keep every one of a plan's planes (depths
+    ``plan.far_depth - k * plan.step``, k < ``plan.count``) well inside them, for geometry
+    drawn on those planes (a tiny near plane would leave no depth precision at the far
+    ones)."""
+    nearest = plan.far_depth - (plan.count - 1) * plan.step
+    if plan.scene.camera.is_ortho:
+        return eye_view_projection(plan.scene, 0.5 * nearest, plan.far_depth + plan.step)
+    return eye_view_projection(plan.scene, 0.5 * nearest, 2.0 * plan.far_depth + plan.step)
+
+
 def box_depth_range(scene):
     """Smallest and largest depth (distance along the view direction from the eye) of
     the volume box's corners."""
@@ -416,12 +455,14 @@ def draw_box_instances(renderer, prog, scene, instances):
 
 
 class SizedTarget:
-    """An RGBA32F framebuffer (with a depth attachment when ``depth``) for a technique's
-    own passes, remade only when the image size changes."""
+    """A float32 framebuffer (colour textures of the given component counts, RGBA by
+    default, and a depth attachment when ``depth``) for a technique's own passes, remade
+    only when the image size changes."""
 
-    def __init__(self, ctx, depth=False):
+    def __init__(self, ctx, depth=False, components=(4,)):
         self.ctx = ctx
         self.depth = depth
+        self.components = tuple(components)
         self.size = None
         self.fbo = None
 
@@ -429,7 +470,8 @@ class SizedTarget:
         if self.size != (width, height):
             self.release()
             depth = self.ctx.depth_texture((width, height)) if self.depth else None
-            self.fbo = self.ctx.framebuffer([self.ctx.texture((width, height), 4, dtype="f4")], depth)
+            colors = [self.ctx.texture((width, height), n, dtype="f4") for n in self.components]
+            self.fbo = self.ctx.framebuffer(colors, depth)
             self.size = (width, height)
         return self.fbo
 

@@ -58,11 +58,10 @@ from ..scene import Scene
 from ..transfer import LookupTable
 from . import proxy as proxy_geometry
 from .common import (cleared_target, add_optional_inputs, shading_defines, bind, camera_uniforms, draw_box_instances, check_flag, check_scene,
-                     check_step, check_target, eye_view_projection, preintegration_table, tf_uniforms,
-                     volume_uniforms)
+                     check_step, check_target, inflated_corners, plane_projection, plane_triangles, preintegration_table,
+                     tf_uniforms, volume_uniforms)
 
 PROXIES = ("cpu", "vertex")
-INFLATE = 1e-3  # proxy polygons are cut from the box grown by this fraction of its diagonal
 
 MODES = ("composite",)
 DATA = "volume"
@@ -144,19 +143,6 @@ def shell_radii(extent, eye, step):
 # ---------------------------------------------------------------------------------------
 # GL path
 
-def _plane_projection(plan):
-    """View-projection whose near and far planes keep every slice."""
-    nearest = plan.far_depth - (plan.count - 1) * plan.step
-    if plan.scene.camera.is_ortho:
-        return eye_view_projection(plan.scene, 0.5 * nearest, plan.far_depth + plan.step)
-    return eye_view_projection(plan.scene, 0.5 * nearest, 2.0 * plan.far_depth + plan.step)
-
-
-def _inflated_corners(volume):
-    margin = INFLATE * float(np.linalg.norm(volume.extent))
-    return proxy_geometry.box_corners(np.full(3, -margin), volume.extent + margin)
-
-
 def draw(renderer, plan):
     """Render the plan into the renderer's target; returns that framebuffer."""
     ctx = renderer.ctx
@@ -188,18 +174,15 @@ def draw(renderer, plan):
         if plan.shells:
             draw_box_instances(renderer, prog, scene, plan.count)
         elif plan.proxy == "vertex":
-            corners = _inflated_corners(volume)
+            corners = inflated_corners(volume)
             tables = proxy_geometry.vertex_path_tables(cam.forward)
             bind(prog, {}, {"u_corners": [tuple(c) for c in corners], "u_normal": tuple(cam.forward),
                             **tables})
-            prog["u_view_proj"].write(_plane_projection(plan).astype("f4").tobytes())
+            prog["u_view_proj"].write(plane_projection(plan).astype("f4").tobytes())
             renderer.empty_vao(prog).render(ctx.TRIANGLES, vertices=12, instances=plan.count)
         else:
-            lo, _ = volume.bounds
-            offsets = proxy_geometry.plane_offsets(cam.forward, cam.eye - lo, plan.far_depth, plan.step, plan.count)
-            vertices, counts = proxy_geometry.plane_polygons(_inflated_corners(volume), cam.forward, offsets)
-            positions, slices = proxy_geometry.fan_triangles(vertices, counts)
-            prog["u_view_proj"].write(_plane_projection(plan).astype("f4").tobytes())
+            positions, slices, _ = plane_triangles(scene, plan.far_depth, plan.step, plan.count)
+            prog["u_view_proj"].write(plane_projection(plan).astype("f4").tobytes())
             renderer.stream_vao(prog, "slice3d_cpu", positions, slices).render(ctx.TRIANGLES)
         gap = renderer.programs.get("common/box_instances.vert", "slice3d/slice3d.frag", {**plan.defines, "GAP": 1})
         bind(gap, textures, uniforms)

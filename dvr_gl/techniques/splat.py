@@ -1,5 +1,76 @@
-"""Splatting (Westover 1990; elliptical kernels after Zwicker et al. 2001): every
-classified grid sample is a Gaussian kernel that carries its share of the extinction,
+"""Splatting: every sample of the data is a reconstruction kernel, and GL draws each
+kernel's footprint. Two kernels, chosen with ``kernel``.
+
+About the tent kernel (``kernel="tent"``, grids, the default)
+-------------------------------------------------------------
+Image-aligned sheet-buffer splatting with post-classification (Mueller and Crawfis 1998;
+Mueller, Moeller and Crawfis 1999, "Splatting without the blur"). Each grid sample carries
+the trilinear "tent" kernel: ``h(x) = prod_a max(0, 1 - |x_a| / s_a)`` over the axes, one
+spacing ``s`` wide on either side. Tents centred on the samples add up to trilinear
+interpolation, so ``sum_i h(x - x_i) v_i`` is the contract's field itself, not a blurred
+copy of it.
+
+Sheets. Per view, planes perpendicular to the view direction (image-aligned, under
+perspective too) sit ``sheet_spacing`` apart, at depths ``(j + 0.5) * sheet_spacing``
+from the eye, the same planes as 3D slicing's. For each sheet, front to back:
+
+1. *Splat.* Every sample whose tent reaches the sheet (its depth within ``r = sum_a
+   |forward_a| s_a`` of the sheet's) is added into a float sheet buffer by a quad on the
+   sheet covering the cut through the tent's support box. Each fragment rebuilds its
+   pixel's ray, takes its point ``p`` on the sheet and adds ``(w v, w)`` with ``w =
+   h(p - x_i)`` (additive blending). The buffer then holds, per pixel, ``sum w v`` and
+   ``sum w``: the trilinear field where the pixel's ray crosses the sheet, and the
+   weight of the samples drawn there. The samples are drawn in runs: maximal sequences
+   of splatted neighbours along the axis whose runs make the fewest quads in this view
+   (``run_axis``), one quad per run and sheet, its fragments adding the tents of the
+   two samples of the run around ``p`` (the others are zero there). The sums are those
+   of one quad per sample, for several times fewer quads (llvmpipe sets up about 3
+   million a second) and half the fragments. A quad is the bounding rectangle, along
+   the runs' direction on the sheet and across it, of the cut through the run's
+   supports, grown by a sixteenth of a pixel: the bounds of the cut through one support
+   are linear in the sheet's offset between the support box's corner depths, so a table
+   of them at those 8 depths, made once per view (``section_table``), and the run's
+   sweep (``run_quads``) place every quad exactly.
+2. *Classify and composite.* The sheet's polygon inside the box is drawn over the image
+   (3D slicing's CPU polygons). Each fragment reads its pixel of the sheet buffer, takes
+   ``s = sum w v / sum w``, classifies it with the transfer function's table, corrects
+   its opacity for the piece of its own ray the sheet stands for (from halfway to the
+   nearer sheet to halfway to the farther one, or to the box's face where there is no
+   neighbour: ``shaders/common/slabs.glsl``, whose length changes per pixel under
+   perspective), lights it when the scene asks, and is blended front to back
+   (``ONE_MINUS_DST_ALPHA, ONE``).
+
+A pixel's image is then the midpoint rule along its ray with samples at the sheets: the
+ray caster's error at a step of ``sheet_spacing``. What splatting adds is where the field
+comes from (the kernels, not a 3D texture). Rays whose chord inside the box is shorter
+than the sheet spacing may meet no sheet inside the box (at the box's silhouette); they
+stay empty, in the reference too.
+
+Empty space. A sample none of whose cells (the up to 8 cells it is a corner of) has a
+value range with non-zero opacity (``raycast.brick_occupancy`` per cell, with its float32
+widening) is not splatted (``skip_empty=True``). That changes no pixel: a cell that is
+occupied has all its corners splatted, so there ``sum w = 1`` and the value is exact; in
+an empty cell ``s`` is a weighted mean of some of its corners, so it stays inside the
+cell's range, which classifies to zero opacity. Dividing by ``sum w`` is what makes this
+exact. Non-finite samples (``mask_nonfinite``) are splatted into a third channel instead,
+where they are corners of a cell with a splatted corner, and a pixel whose point has any
+weight there is outside the domain, as the contract's masked cells are.
+
+Lighting. Each splatted sample also carries its central-difference gradient (into a
+second buffer, ``sum w g``). Interpolating those with the tent weights is exactly the
+contract's gradient (central differences of the interpolated field, clamped at the box:
+see ``reference.shading.sample_gradients``), so the lit sheets are the contract's too.
+
+``density=k`` puts the sheets ``k`` times closer (``min spacing / k`` apart); the
+samples stay the data's, since tents on a ``k`` times finer trilinear resampling of the
+field add up to the same field (trilinear interpolation reproduces a trilinear function),
+so resampling would only multiply the splats by ``k^3``. ``sheet_spacing`` sets the
+distance in world units instead.
+
+About the Gaussian kernel (``kernel="gaussian"``, grids and meshes; a mesh's only one)
+-----------------------------------------------------------------------------------
+Pre-classified splatting (Westover 1990; elliptical kernels after Zwicker et al. 2001):
+every classified sample is a Gaussian kernel that carries its share of the extinction,
 and GL composites the kernels' footprints back to front.
 
 The model. With samples ``x_i`` on a grid of spacing ``h`` (the data's, or ``density``
@@ -18,11 +89,13 @@ splatting approximates with an affine map: exact under perspective and for aniso
 spacing. The kernel is truncated at ``cutoff`` standard deviations (``F = 0`` for rays
 farther away; the rest renormalised). Each splat is composited over what is behind it,
 with opacity ``1 - exp(-tau V_i F_i)`` and colour ``c(s_i)`` (the sample classified first,
-then reconstructed: pre-classification).
+then reconstructed: pre-classification, which blurs every feature narrower than a kernel).
 
 Meshes: the samples are the mesh's points, each carrying its lumped volume (a quarter of
 every cell it is a corner of: the integral of its linear basis function), its kernel
-isotropic and ``radius`` times the mean length of the edges that meet there.
+isotropic and ``radius`` times the mean length of the edges that meet there. (A tent on a
+tetrahedral mesh, the linear "hat" of a point, is not a tensor product and has no
+image-aligned cut of the same simple form; meshes keep the Gaussian kernel.)
 
 Lighting (``Scene(shading=True)``): each splat carries the gradient at its centre (a
 mesh's vertex: the volume-weighted mean of its cells' gradients), and its colour is lit
@@ -35,11 +108,18 @@ volume, transfer function and density.
 
 Options (same names in ``dvr_gl.reference.render``)
 ---------------------------------------------------
-density : int from 1 to 8 (default 1), samples per data spacing along each axis (grids only).
-radius : kernel standard deviation in sample spacings, or in mean edge lengths on a mesh
-    (default 0.4: the balance of holes and blur measured in the README).
-cutoff : truncation in standard deviations (default 3).
-target : "rgba32f" (default) | "rgba16f" | "rgba8": blending happens in the target.
+kernel : "tent" (grids' default) | "gaussian" (meshes' only kernel).
+density : int from 1 to 8 (default 1). Tent: sheets per data spacing (the smallest);
+    Gaussian: samples per data spacing along each axis (grids only).
+sheet_spacing : tent only: the distance between sheets in world units (default: the
+    smallest spacing over ``density``).
+skip_empty : tent only (default True): leave out the samples whose cells are all
+    transparent (the image is the same either way).
+radius : Gaussian only: kernel standard deviation in sample spacings, or in mean edge
+    lengths on a mesh (default 0.4: the balance of holes and blur measured in the README).
+cutoff : Gaussian only: truncation in standard deviations (default 3).
+target : "rgba32f" (default) | "rgba16f" | "rgba8": blending happens in the target (the
+    tent's sheet buffers are RGBA32F whatever the target).
 """
 
 from __future__ import annotations
@@ -52,18 +132,542 @@ import numpy as np
 from ..cache import TableCache
 from ..reference.common import cell_is_valid, trilinear
 from ..scene import Scene
-from .common import (cleared_target, bind, camera_uniforms, check_scene, check_target, data_projection,
-                     point_shading_defines, sample_term_uniforms)
+from ..transfer import LookupTable
+from . import proxy as proxy_geometry
+from .common import (SizedTarget, bind, camera_uniforms, check_flag, check_scene, check_step, check_target,
+                     cleared_target, data_projection, plane_projection, plane_triangles, point_shading_defines,
+                     sample_term_uniforms, tf_uniforms)
 from ..particles import extinction
 from .particles import pixels_per_unit
 
-POINT_SPRITES = True  # drawn as GL points, which are clipped by their centres (see Renderer.render)
+POINT_SPRITES = True  # the Gaussian kernel's splats are GL points, clipped by their centres (see Renderer.render)
 MODES = ("composite",)
 TAKES_STEP = False
 DATA = ("volume", "mesh")
+KERNELS = ("tent", "gaussian")
 DEFAULT_RADIUS = 0.4
 DEFAULT_CUTOFF = 3.0
+# Tent quads are grown by this many pixels on every side: many times the rasteriser's
+# vertex snapping (1/256 pixel on llvmpipe, grow_pixels) and the float32 rounding of their
+# corners, so every pixel centre inside a support is covered whatever the tile; pixels
+# the margin adds lie outside it and add nothing.
+QUAD_MARGIN = 1.0 / 16
 
+
+def make_plan(scene, step=None, *, kernel=None, density=1, sheet_spacing=None, skip_empty=True, radius=None,
+              cutoff=None, target="rgba32f", tables=None):
+    """Validate the options and plan the kernel's splats for this view (the samples are
+    made once per volume and transfer function, the order once per view)."""
+    tables = tables or TableCache()
+    check_scene(scene, "splat", MODES, data=DATA)
+    if step is not None:
+        raise ValueError(f"splat takes no step (see density and sheet_spacing), got step={step!r}")
+    if kernel is None:
+        kernel = "gaussian" if scene.is_mesh else "tent"
+    if kernel not in KERNELS:
+        raise ValueError(f"kernel must be one of {', '.join(KERNELS)}, got {kernel!r}")
+    if isinstance(density, bool) or not isinstance(density, (int, np.integer)) or not 1 <= density <= 8:
+        raise ValueError(f"density must be an integer from 1 to 8, got {density!r}")
+    skip_empty = check_flag("skip_empty", skip_empty)
+    check_target(target)
+    if kernel == "tent":
+        if scene.is_mesh:
+            raise ValueError("kernel 'tent' splats a grid's samples (trilinear tents); a TetMesh is splatted "
+                             "with kernel 'gaussian'")
+        given = [name for name, value in (("radius", radius), ("cutoff", cutoff)) if value is not None]
+        if given:
+            raise ValueError(f"{' and '.join(given)} size the Gaussian kernel (kernel='gaussian'); the tent "
+                             "kernel is one sample spacing wide")
+        return _tent_plan(scene, int(density), sheet_spacing, skip_empty, target, tables)
+    if sheet_spacing is not None:
+        raise ValueError("sheet_spacing is the tent kernel's (kernel='tent'); the Gaussian kernel's splats "
+                         "are composited one by one")
+    if not skip_empty:
+        raise ValueError("skip_empty is the tent kernel's: Gaussian splats with zero extinction add nothing "
+                         "and are never drawn")
+    radius = DEFAULT_RADIUS if radius is None else radius
+    cutoff = DEFAULT_CUTOFF if cutoff is None else cutoff
+    return _gaussian_plan(scene, density, radius, cutoff, target, tables)
+
+
+def draw(renderer, plan):
+    """Render the plan into the renderer's target; returns that framebuffer."""
+    return _draw_tent(renderer, plan) if plan.kernel == "tent" else _draw_gaussian(renderer, plan)
+
+
+# ---------------------------------------------------------------------------------------
+# The tent kernel: sheet buffers
+
+@dataclass
+class TentSamples:
+    """The samples a tent plan splats, made once per volume, transfer function and
+    ``skip_empty``: ``values`` (N,) float32 (0 for a non-finite sample); ``at`` (N, 3)
+    int32, their indices (x, y, z); ``finite`` (N,) bool; ``mask`` (nz, ny, nx) bool,
+    which of the volume's samples these are (in its C order)."""
+    values: np.ndarray
+    at: np.ndarray
+    finite: np.ndarray
+    mask: np.ndarray
+    run_stats: list = field(default_factory=list)    # per axis: (runs, their extent in spacings)
+
+    @property
+    def count(self):
+        return len(self.values)
+
+
+@dataclass
+class Runs:
+    """The splatted samples in runs along ``axis`` (0 = x): maximal sequences of
+    splatted neighbours along it. ``runs`` (R + 1, 4) int32: the first sample's indices
+    (x, y, z) and the run's first row in the per-sample arrays, the last row only that
+    offset (the total); ``ids`` (N,) the sample (row of ``TentSamples``) at each position
+    in run order."""
+    axis: int
+    runs: np.ndarray
+    ids: np.ndarray
+
+    @property
+    def count(self):
+        return len(self.runs) - 1
+
+
+@dataclass
+class SheetOrder:
+    """One view's sheets and what each draws. Sheet ``k`` (0 the farthest) lies at depth
+    ``far_depth - k * spacing``; the samples are drawn in ``runs`` along ``runs.axis``,
+    and sheet k draws the runs ``order[first : first + n]`` with ``first, n = ranges[k]``
+    (besides those that reach it, at most one sheet's worth more, which the vertex shader
+    drops)."""
+    far_depth: float
+    count: int
+    spacing: float
+    runs: Runs | None
+    order: np.ndarray
+    ranges: np.ndarray
+
+    def depths(self):
+        return self.far_depth - np.arange(self.count) * self.spacing
+
+
+@dataclass
+class TentPlan:
+    scene: Scene
+    samples: TentSamples
+    sheets: SheetOrder
+    lut: LookupTable
+    density: int = 1
+    skip_empty: bool = True
+    target: str = "rgba32f"
+    defines: dict = field(default_factory=dict)        # the sheet (classification) pass's
+    splat_defines: dict = field(default_factory=dict)  # the splat pass's
+    gradients: np.ndarray | None = None   # lit: (N, 3) float32, the gradient at each sample
+    kernel: str = "tent"
+
+    @property
+    def step(self):
+        """The distance between sheets."""
+        return self.sheets.spacing
+
+    @property
+    def far_depth(self):
+        return self.sheets.far_depth
+
+    @property
+    def count(self):
+        return self.sheets.count
+
+
+def _tent_plan(scene, density, sheet_spacing, skip_empty, target, tables):
+    volume = scene.volume
+    if sheet_spacing is None:
+        sheet_spacing = volume.min_spacing / density
+    else:
+        if density != 1:
+            raise ValueError(f"give density or sheet_spacing, not both (got density={density!r}, "
+                             f"sheet_spacing={sheet_spacing!r})")
+        sheet_spacing = check_step(sheet_spacing, volume, "sheet_spacing")
+    lut = tables.get("lut", scene.tf, make=LookupTable)
+    samples = tables.get(f"tent_samples:{int(skip_empty)}", volume, lut,
+                         make=lambda v, table: tent_samples(v, table, skip_empty))
+    axis = run_axis(samples, volume, scene.camera.forward)
+    runs = None if samples.count == 0 else tables.get("tent_runs", samples, axis,
+                                                      make=lambda s, a: runs_along(s, a))
+    sheets = tables.get("tent_sheets", samples, scene.camera, float(sheet_spacing),
+                        make=lambda s, camera, spacing: sheet_order(scene, runs, spacing))
+    splat_defines = {"ORTHO": 1} if scene.camera.is_ortho else {}
+    if scene.shading:
+        splat_defines["SHADING"] = 1
+    if volume.has_nonfinite:
+        splat_defines["MASK_NONFINITE"] = 1
+    defines = {**splat_defines, **point_shading_defines(scene)}
+    gradients = None
+    if scene.shading:      # once per set of samples
+        gradients = tables.get("tent_gradients", samples, volume, make=tent_gradients)
+    return TentPlan(scene=scene, samples=samples, sheets=sheets, lut=lut, density=density, skip_empty=skip_empty,
+                    target=target, defines=defines, splat_defines=splat_defines, gradients=gradients)
+
+
+def occupied_cells(volume, lut):
+    """(nz - 1, ny - 1, nx - 1) bool: the cells whose value range (the least and greatest
+    of their 8 corners, which bound the trilinear field inside them) has non-zero opacity
+    in the lookup table somewhere, by ``raycast.brick_occupancy`` (once per distinct
+    range), so with its allowance for float32 rounding. Cells with a non-finite corner
+    are outside the domain: never occupied."""
+    from .raycast import brick_occupancy
+    v = volume.values(np.float32)
+    nz, ny, nx = v.shape
+    eight = [v[z:z + nz - 1, y:y + ny - 1, x:x + nx - 1] for z in (0, 1) for y in (0, 1) for x in (0, 1)]
+    lo, hi = np.minimum.reduce(eight).ravel(), np.maximum.reduce(eight).ravel()
+    key = (lo.view(np.uint32).astype(np.uint64) << np.uint64(32)) | hi.view(np.uint32).astype(np.uint64)
+    ranges, inverse = np.unique(key, return_inverse=True)
+    lo = (ranges >> np.uint64(32)).astype(np.uint32).view(np.float32).astype(np.float64)
+    hi = (ranges & np.uint64(0xFFFFFFFF)).astype(np.uint32).view(np.float32).astype(np.float64)
+    occupied = brick_occupancy((lo, hi), lut)[inverse.ravel()].reshape(nz - 1, ny - 1, nx - 1)
+    if volume.cell_valid is not None:
+        occupied &= volume.cell_valid
+    return occupied
+
+
+def _corners_of(cells):
+    """The samples that are a corner of some cell set in ``cells``."""
+    nz, ny, nx = cells.shape
+    out = np.zeros((nz + 1, ny + 1, nx + 1), bool)
+    for z in (0, 1):
+        for y in (0, 1):
+            for x in (0, 1):
+                out[z:z + nz, y:y + ny, x:x + nx] |= cells
+    return out
+
+
+def _cells_with_a_corner(samples):
+    """The cells that have some sample set in ``samples`` as a corner."""
+    nz, ny, nx = samples.shape
+    return np.logical_or.reduce([samples[z:z + nz - 1, y:y + ny - 1, x:x + nx - 1]
+                                 for z in (0, 1) for y in (0, 1) for x in (0, 1)])
+
+
+def tent_samples(volume, lut, skip_empty=True):
+    """The samples to splat: with ``skip_empty``, the corners of occupied cells (see
+    ``occupied_cells``) and the non-finite corners of cells that have one of those; else
+    every sample."""
+    finite = np.isfinite(volume.data) if volume.has_nonfinite else None
+    if skip_empty:
+        mask = _corners_of(occupied_cells(volume, lut))
+        if finite is not None:
+            mask &= finite
+            mask |= _corners_of(_cells_with_a_corner(mask)) & ~finite
+    else:
+        mask = np.ones(volume.shape, bool)
+    at = np.argwhere(mask)[:, ::-1].astype(np.int32)           # x, y, z; the order of mask's True
+    flags = np.ones(len(at), bool) if finite is None else finite[mask]
+    return TentSamples(volume.values(np.float32)[mask], at, flags, mask, _run_stats(mask))
+
+
+def _run_stats(mask):
+    """Per axis x, y, z: (number of runs, their total extent in spacings)."""
+    stats = []
+    for axis in range(3):
+        m = np.moveaxis(mask, 2 - axis, -1)
+        starts = int((m[..., 1:] & ~m[..., :-1]).sum() + m[..., 0].sum())
+        stats.append((starts, int(mask.sum()) - starts))
+    return stats
+
+
+def run_axis(samples, volume, forward):
+    """The axis whose runs make the fewest quads in this view: a run reaches as many
+    sheets as its depth extent, ``length * s_a |forward_a|``, plus the tent's own,
+    ``2 sum_a |forward_a| s_a``, so the count is about ``extent * s_a |f_a| + runs * 2r``."""
+    if samples.count == 0:
+        return 0
+    reach = kernel_reach(volume, forward)
+    cost = [extent * volume.spacing[a] * abs(forward[a]) + starts * 2 * reach
+            for a, (starts, extent) in enumerate(samples.run_stats)]
+    return int(np.argmin(cost))
+
+
+def runs_along(samples, axis):
+    """The samples' ``Runs`` along ``axis``."""
+    slot = np.full(samples.mask.shape, -1, np.int64)
+    slot[samples.mask] = np.arange(samples.count)
+    moved = np.moveaxis(slot, 2 - axis, -1)                     # the run axis fastest
+    flat = np.flatnonzero(moved.ravel() >= 0)
+    ids = moved.ravel()[flat]
+    n = moved.shape[-1]
+    start = np.ones(flat.size, bool)
+    start[1:] = (flat[1:] != flat[:-1] + 1) | (flat[1:] % n == 0)
+    first = np.flatnonzero(start)
+    runs = np.zeros((first.size + 1, 4), np.int32)
+    runs[:-1, :3] = samples.at[ids[first]]
+    runs[:-1, 3] = first
+    runs[-1, 3] = flat.size
+    return Runs(axis, runs, ids.astype(np.int64))
+
+
+def tent_gradients(samples, volume):
+    """(N, 3) float32: each splatted sample's central differences (see
+    ``reference.shading.sample_gradients``)."""
+    from ..reference.shading import sample_gradients
+    return sample_gradients(volume, volume.values(np.float64), at=samples.at).astype(np.float32)
+
+
+def kernel_reach(volume, forward):
+    """How far the tent's support reaches in depth from its centre: sum_a |forward_a| s_a."""
+    return float(np.abs(np.asarray(forward, np.float64)) @ volume.spacing)
+
+
+def sheet_order(scene, runs, spacing):
+    """The sheets of this view ``spacing`` apart and, for each, the runs whose tents may
+    reach it (those whose support's depth range holds the sheet's depth, give or take a
+    sheet), listed sheet by sheet."""
+    cam = scene.camera
+    volume = scene.volume
+    eye = cam.eye - volume.bounds[0]
+    corners = proxy_geometry.box_corners(np.zeros(3), volume.extent)
+    far_depth, count = proxy_geometry.slice_depths(corners, cam.forward, eye, spacing)
+    if count == 0 or runs is None or runs.count == 0:
+        return SheetOrder(far_depth, count, spacing, runs, np.zeros(0, np.int32), np.zeros((count, 2), np.int64))
+    reach = kernel_reach(volume, cam.forward)
+    starts = runs.runs[:-1, :3].astype(np.float64) * volume.spacing
+    lengths = np.diff(runs.runs[:, 3]).astype(np.float64)
+    z0 = (starts - eye) @ cam.forward
+    z1 = z0 + (lengths - 1) * volume.spacing[runs.axis] * cam.forward[runs.axis]
+    near = np.minimum(z0, z1) - reach
+    far = np.maximum(z0, z1) + reach
+    # sheet k's depth far_depth - k * spacing lies in (near, far) for k in (k0, k1); one
+    # sheet more on each side covers the rounding
+    k0 = np.maximum(np.floor((far_depth - far) / spacing), 0).astype(np.int64)
+    k1 = np.minimum(np.ceil((far_depth - near) / spacing), count - 1).astype(np.int64)
+    n = np.maximum(k1 - k0 + 1, 0)
+    run = np.repeat(np.arange(runs.count), n)
+    sheet = np.repeat(k0 - np.cumsum(n) + n, n) + np.arange(int(n.sum()))
+    key = sheet.astype(np.uint16 if count <= 65536 else np.uint32)
+    by_sheet = np.argsort(key, kind="stable")
+    order = run[by_sheet].astype(np.int32)
+    per_sheet = np.bincount(sheet, minlength=count)
+    first = np.concatenate([[0], np.cumsum(per_sheet)[:-1]])
+    return SheetOrder(far_depth, count, spacing, runs, order, np.stack([first, per_sheet], axis=1).astype(np.int64))
+
+
+def run_frame(forward, axis, right):
+    """The quads' axes in the sheet plane: ``u`` along the runs' direction seen on the
+    sheet (``right`` if the view runs along them, when any frame does), ``v`` across
+    it, so that a long run's cut is a long thin strip along ``u`` with a tight rectangle."""
+    f = np.asarray(forward, np.float64)
+    e = np.zeros(3)
+    e[axis] = 1.0
+    u = e - f[axis] * f
+    u = np.asarray(right, np.float64) if np.linalg.norm(u) < 1e-6 else u / np.linalg.norm(u)
+    return u, np.cross(f, u)
+
+
+def section_table(spacing, forward, u, v):
+    """The tent's support (the box of half-widths ``spacing`` about its centre) cut by
+    the planes perpendicular to ``forward``: at each of its 8 corners' depths (ascending,
+    relative to the centre), the bounding rectangle (u min, u max, v min, v max) of the
+    cut along the axes ``u`` and ``v`` of the plane. Between two consecutive corner depths
+    each bound is linear in the plane's depth (the cut's extreme point slides along one
+    edge of the box and changes edge only at a corner), so interpolating this table gives
+    the rectangle of any cut exactly. Returns (depths (8,), rects (8, 4))."""
+    corners = proxy_geometry.box_corners(-np.asarray(spacing, np.float64), np.asarray(spacing, np.float64))
+    d = corners @ np.asarray(forward, np.float64)
+    depths = np.sort(d)
+    rects = np.empty((8, 4))
+    a, b = proxy_geometry.EDGES[:, 0], proxy_geometry.EDGES[:, 1]
+    for j, delta in enumerate(depths):
+        cross = (d[a] - delta) * (d[b] - delta) < 0
+        t = (delta - d[a][cross]) / (d[b][cross] - d[a][cross])
+        points = np.concatenate([corners[d == delta],
+                                 corners[a[cross]] + t[:, None] * (corners[b[cross]] - corners[a[cross]])])
+        pu, pv = points @ np.asarray(u, np.float64), points @ np.asarray(v, np.float64)
+        rects[j] = pu.min(), pu.max(), pv.min(), pv.max()
+    return depths, rects
+
+
+def section_rect(table, delta):
+    """The interpolated rectangle of the cut at offsets ``delta`` (..., 4), NaN outside
+    the support (the table lookup of shaders/splat/tent.vert)."""
+    depths, rects = table
+    delta = np.asarray(delta, np.float64)
+    j = np.clip(np.searchsorted(depths, delta, side="left") - 1, 0, 6)
+    lo, hi = depths[j], depths[j + 1]
+    f = np.clip((delta - lo) / np.where(hi > lo, hi - lo, 1.0), 0.0, 1.0)[..., None]
+    out = rects[j] * (1 - f) + rects[j + 1] * f
+    return np.where(((delta >= depths[0]) & (delta <= depths[-1]))[..., None], out, np.nan)
+
+
+def run_quads(table, forward, axis, u, v, spacing, lengths, delta0):
+    """NumPy twin of shaders/splat/tent.vert's rectangle (without its margin):
+    for runs whose first sample's centre lies ``delta0`` in front of the sheet, the
+    bounding rectangle (u min, u max, v min, v max) along ``u`` and ``v`` (relative to
+    that centre moved onto the sheet) of the sheet's cut through the union of the run's
+    supports; NaN where it misses them. The union is the support swept along the run:
+    over the run's centres ``x e_a`` the cut at offset ``delta0 - x f_a`` moved by
+    ``x (e_a . u, e_a . v)``, whose bounds are piecewise linear in x with corners where
+    the offset meets a table depth, so their extremes lie at the ends or at those
+    corners."""
+    depths, rects = table
+    fa = float(forward[axis])
+    shift = np.array([u[axis], u[axis], v[axis], v[axis]], np.float64)
+    extent = (np.asarray(lengths, np.float64) - 1) * spacing[axis]
+    delta0 = np.asarray(delta0, np.float64)
+    lo, hi = np.zeros_like(delta0), extent.copy()
+    if fa != 0.0:
+        ends = np.sort(np.stack([(delta0 - depths[-1]) / fa, (delta0 - depths[0]) / fa]), axis=0)
+        lo, hi = np.maximum(lo, ends[0]), np.minimum(hi, ends[1])
+    candidates = [lo, hi] + ([] if fa == 0.0 else [np.clip((delta0 - d) / fa, lo, hi) for d in depths])
+    out = np.full(delta0.shape + (4,), np.nan)
+    for x in candidates:
+        r = section_rect(table, np.clip(delta0 - x * fa, depths[0], depths[-1]))
+        r = r + x[..., None] * shift
+        out = np.stack([np.fmin(out[..., 0], r[..., 0]), np.fmax(out[..., 1], r[..., 1]),
+                        np.fmin(out[..., 2], r[..., 2]), np.fmax(out[..., 3], r[..., 3])], axis=-1)
+    return np.where((lo <= hi)[..., None], out, np.nan)
+
+
+def pixel_size(scene):
+    """World units per pixel: at unit depth (perspective) or anywhere (orthographic)."""
+    return 2.0 * scene.camera.screen_scale(scene.width, scene.height)[1] / scene.height
+
+
+class _TentTextures:
+    """A set of tent samples on the GPU in runs along one axis, uploaded once: the runs,
+    and per sample in run order its value and non-finite flag, and (lit) its gradient;
+    plus the view's order of runs (rewritten when the view changes)."""
+
+    def __init__(self, ctx, samples, runs, gradients):
+        from .tetra import _OrderTexture
+        self.ctx = ctx
+        self.runs = _rows_texture(ctx, runs.runs, "i4")
+        values = np.stack([samples.values[runs.ids], ~samples.finite[runs.ids]], axis=1)
+        self.values = _rows_texture(ctx, values, "f4")
+        self.gradients = None if gradients is None else _rows_texture(ctx, gradients[runs.ids], "f4")
+        self.order = _OrderTexture()
+        self.order_of = None
+
+    def ordered(self, sheets):
+        if self.order_of is not sheets:
+            self.order.write(self.ctx, sheets.order if sheets.order.size else np.zeros(1, np.int32))
+            self.order_of = sheets
+        return self.order.tex
+
+    def release(self):
+        for tex in (self.runs, self.values, self.gradients):
+            if tex is not None:
+                tex.release()
+        self.order.release()
+
+
+class _Quads:
+    """Two triangles per quad, indexed: quad q's corners are vertices 4q .. 4q + 3
+    (shaders/splat/tent.vert places them by gl_VertexID), so the vertex cache shades
+    each corner once instead of once per triangle. Grown (never shrunk) as needed."""
+
+    def __init__(self, ctx):
+        self.ctx = ctx
+        self.ibo = None
+        self.capacity = 0
+        self.vaos = {}
+
+    def vao(self, prog, quads):
+        if quads > self.capacity:
+            self.release()
+            self.capacity = max(quads, 2 * self.capacity, 1024)
+            pattern = np.array([0, 1, 2, 2, 1, 3], np.uint32)
+            index = (4 * np.arange(self.capacity, dtype=np.uint32)[:, None] + pattern).ravel()
+            self.ibo = self.ctx.buffer(index.tobytes())
+        vao = self.vaos.get(prog.glo)
+        if vao is None:
+            vao = self.vaos[prog.glo] = self.ctx.vertex_array(prog, [], index_buffer=self.ibo, index_element_size=4)
+        return vao
+
+    def release(self):
+        for vao in self.vaos.values():
+            vao.release()
+        self.vaos.clear()
+        if self.ibo is not None:
+            self.ibo.release()
+            self.ibo = None
+
+
+def _rows_texture(ctx, array, dtype):
+    from .tetra import TEXEL_ROW_WIDTH, texture_rows
+    rows = texture_rows(np.ascontiguousarray(array, np.int32 if dtype == "i4" else np.float32))
+    tex = ctx.texture((TEXEL_ROW_WIDTH, rows.shape[0]), rows.shape[2], rows.tobytes(), dtype=dtype)
+    tex.filter = (ctx.NEAREST, ctx.NEAREST)
+    return tex
+
+
+def _draw_tent(renderer, plan):
+    ctx = renderer.ctx
+    scene = plan.scene
+    sheets = plan.sheets
+    fbo = cleared_target(renderer, scene, plan.target)
+    if sheets.count == 0 or not sheets.ranges[:, 1].any():
+        return fbo
+    lit = plan.gradients is not None
+    runs = sheets.runs
+    splat = renderer.programs.get("splat/tent.vert", "splat/tent.frag", plan.splat_defines)
+    classify = renderer.programs.get("common/slice_polygons.vert", "splat/sheet.frag", plan.defines)
+    gpu = renderer.resource("splat_tent", plan.samples, runs, plan.gradients, capacity=3,     # an axis each
+                            make=lambda: _TentTextures(ctx, plan.samples, runs, plan.gradients))
+    # (sum w v, sum w) and, for masked data, the non-finite weight; (sum w g) when lit
+    channels = (4 if scene.volume.has_nonfinite else 2,) + ((4,) if lit else ())
+    buffers = renderer.resource("splat_sheet", *channels, capacity=2,
+                                make=lambda: SizedTarget(ctx, components=channels)).get(*scene.target_size)
+
+    cam = scene.camera
+    u, v = run_frame(cam.forward, runs.axis, cam.right)
+    depths, rects = section_table(scene.volume.spacing, cam.forward, u, v)
+    slabs = {"u_far_depth": sheets.far_depth, "u_step": sheets.spacing, "u_slice_count": sheets.count}
+    view_proj = plane_projection(plan).astype("f4").tobytes()      # every quad lies on a sheet
+    splat_textures = {"t_order": gpu.ordered(sheets), "t_runs": gpu.runs, "t_values": gpu.values}
+    if lit:
+        splat_textures["t_gradients"] = gpu.gradients
+    bind(splat, splat_textures, {**camera_uniforms(scene), **slabs, "u_spacing": tuple(scene.volume.spacing),
+                                 "u_axis": runs.axis, "u_u": tuple(u), "u_v": tuple(v),
+                                 "u_section_depth": tuple(depths), "u_section_rect": [tuple(r) for r in rects],
+                                 "u_margin": QUAD_MARGIN * pixel_size(scene)})
+    splat["u_view_proj"].write(view_proj)
+    sheet_textures = {"t_tf": renderer.tf_texture(plan.lut), "t_sheet": buffers.color_attachments[0]}
+    if lit:
+        sheet_textures["t_sheet_gradient"] = buffers.color_attachments[1]
+    uniforms = {**camera_uniforms(scene), **slabs, **tf_uniforms(plan.lut, scene.tf),
+                "u_extent": tuple(scene.volume.extent)}
+    if lit:
+        uniforms.update(sample_term_uniforms(renderer, scene, plan.defines))
+    bind(classify, sheet_textures, uniforms, first_unit=len(splat_textures))
+    classify["u_view_proj"].write(view_proj)
+    positions, index, polygon = plane_triangles(scene, sheets.far_depth, sheets.spacing, sheets.count)
+    polygons = renderer.stream_vao(classify, "splat_sheets", positions, index)
+    quads = renderer.resource("splat_quads", make=lambda: _Quads(ctx), capacity=1).vao(
+        splat, int(sheets.ranges[:, 1].max()))
+
+    ctx.disable(ctx.DEPTH_TEST | ctx.CULL_FACE)
+    ctx.enable(ctx.BLEND)
+    ctx.blend_equation = ctx.FUNC_ADD
+    try:
+        for k in range(sheets.count - 1, -1, -1):        # front to back
+            first, n = (int(x) for x in sheets.ranges[k])
+            start, vertices = (int(x) for x in polygon[k])
+            if n == 0 or vertices == 0:
+                continue
+            buffers.use()
+            buffers.clear(0.0, 0.0, 0.0, 0.0)
+            ctx.blend_func = ctx.ONE, ctx.ONE                  # the tents add up
+            splat["u_slice"].value = k
+            splat["u_first"].value = first
+            quads.render(ctx.TRIANGLES, vertices=6 * n)       # 4 vertices per quad, indexed
+            fbo.use()
+            ctx.blend_func = ctx.ONE_MINUS_DST_ALPHA, ctx.ONE  # the sheet goes behind what is there
+            polygons.render(ctx.TRIANGLES, first=start, vertices=vertices)
+    finally:
+        ctx.disable(ctx.BLEND)
+        ctx.blend_func = ctx.ONE, ctx.ONE_MINUS_SRC_ALPHA
+    return fbo
+
+
+# ---------------------------------------------------------------------------------------
+# The Gaussian kernel: pre-classified footprints, back to front
 
 @dataclass
 class Splats:
@@ -94,6 +698,7 @@ class SplatPlan:
     target: str = "rgba32f"
     defines: dict = field(default_factory=dict)
     gradients: np.ndarray | None = None   # lit: (N, 3) float32, the gradient at each splat's centre
+    kernel: str = "gaussian"
 
     @property
     def sigma(self):
@@ -170,20 +775,12 @@ def back_to_front(scene, splats):
     return np.argsort(-key, kind="stable").astype(np.int32)
 
 
-def make_plan(scene, step=None, *, density=1, radius=DEFAULT_RADIUS, cutoff=DEFAULT_CUTOFF, target="rgba32f",
-              tables=None):
-    """Validate the options, get the samples (once per volume, TF and density) and their
-    order for this view."""
-    tables = tables or TableCache()
-    check_scene(scene, "splat", MODES, data=DATA)
-    if step is not None:
-        raise ValueError(f"splat takes no step (see density), got step={step!r}")
-    if isinstance(density, bool) or not isinstance(density, (int, np.integer)) or not 1 <= density <= 8:
-        raise ValueError(f"density must be an integer from 1 to 8, got {density!r}")
+def _gaussian_plan(scene, density, radius, cutoff, target, tables):
+    """Check the Gaussian kernel's options, get the samples (once per volume, TF and
+    density) and their order for this view."""
     for name, value in (("radius", radius), ("cutoff", cutoff)):
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not (math.isfinite(value) and value > 0):
             raise ValueError(f"{name} must be a positive number, got {value!r}")
-    check_target(target)
     if scene.is_mesh:
         if density != 1:
             raise ValueError(f"density applies to grids (a mesh is splatted at its points), got density={density!r}")
@@ -209,8 +806,7 @@ def splat_gradients(splats, data):
     return point_gradients(data, splats.points, vertices=splats.vertices).astype(np.float32)
 
 
-def draw(renderer, plan):
-    """Render the plan into the renderer's target; returns that framebuffer."""
+def _draw_gaussian(renderer, plan):
     ctx = renderer.ctx
     scene = plan.scene
     fbo = cleared_target(renderer, scene, plan.target)

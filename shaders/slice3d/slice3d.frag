@@ -3,9 +3,6 @@
 // far to near with ONE, ONE_MINUS_SRC_ALPHA (see techniques/slice3d.py).
 #version 330 core
 
-#ifndef SHELLS
-#define SHELLS 0
-#endif
 #ifndef PREINTEGRATE
 #define PREINTEGRATE 0
 #endif
@@ -21,6 +18,7 @@
 
 #include "common/camera_ray.glsl"
 #include "common/ray_box.glsl"
+#include "common/slabs.glsl"
 #include "common/sampling.glsl"
 #include "common/classification.glsl"
 #if PREINTEGRATE
@@ -31,29 +29,10 @@
 #endif
 
 uniform vec3 u_extent;        // box size; the box is [0, u_extent]
-uniform float u_far_depth;    // depth (radius for shells) of slice 0, the farthest
-uniform float u_step;         // distance between slices
-uniform int u_slice_count;
 uniform float u_inv_unit;     // 1 / transfer-function unit distance
 
 flat in int v_slice;
 out vec4 f_color;
-
-// Ray distance of slice k's point. Neighbours call this with k +- 1 and get exactly the
-// value that slice's own fragments compute, so segments tile the ray without gaps.
-float sliceT(int k, float cos_theta) {
-    float depth = u_far_depth - float(k) * u_step;
-#if SHELLS
-    return depth;
-#else
-    return depth / cos_theta;
-#endif
-}
-
-// Does slice k exist and meet this ray inside the box (and in front of the ray start)?
-bool sliceInside(int k, float t, vec2 range) {
-    return k >= 0 && k < u_slice_count && t > 0.0 && t >= range.x && t <= range.y;
-}
 
 #if !PREINTEGRATE
 vec4 segmentColor(vec3 origin, vec3 dir, float a, float b) {
@@ -85,16 +64,15 @@ void main() {
     int k = v_slice;
     float t = sliceT(k, cos_theta);
     if (!sliceInside(k, t, range)) discard;
+#if !PREINTEGRATE
+    // the slab halfway to each neighbour, or to the box where there is none
+    vec2 slab = slabSegment(k, t, cos_theta, range);
+    f_color = segmentColor(origin, dir, slab.x, slab.y);
+#else
     float t_near = sliceT(k + 1, cos_theta);
     float t_far = sliceT(k - 1, cos_theta);
     bool near_inside = sliceInside(k + 1, t_near, range);
     bool far_inside = sliceInside(k - 1, t_far, range);
-#if !PREINTEGRATE
-    // the slab halfway to each neighbour, or to the box where there is none
-    float a = near_inside ? 0.5 * (t_near + t) : range.x;
-    float b = far_inside ? 0.5 * (t + t_far) : range.y;
-    f_color = segmentColor(origin, dir, a, b);
-#else
     // the segment from this slice to the next one behind it (or the exit), and in front
     // of the first slice a ray meets, the piece from the entry
     vec4 back = segmentColor(origin, dir, t, far_inside ? t_far : range.y);
