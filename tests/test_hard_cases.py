@@ -540,3 +540,85 @@ def test_truncated_and_corrupted_files_give_named_errors(tmp_path_factory):
     check()
     assert outcomes["named error"] > 0
     record("loaders on truncated or corrupted files (200 cases)", "errors other than a named InputError", 0, 0)
+
+
+@pytest.mark.parametrize("distance", [60.0, 120.0, 300.0])
+def test_geometry_of_a_far_small_box_is_not_lost_to_the_depth_range(renderer, distance):
+    """A 9-unit box seen from up to 300 units with a narrow view. With a near plane of
+    1e-6 of the box's diagonal every vertex's clip z and w were equal to float32 rounding
+    and GL's far-plane clip dropped pieces of 2D slices, Gaussian splats and particles at
+    random (GL against reference 0.06 to 1.0 before the fix; ``common.near_plane``). GL
+    against reference within the suite's bounds for each: 1e-4 for slices (float32 on
+    one slab per slice) and the splats, and the identical particle set."""
+    z, y, x = np.mgrid[0:1:10j, 0:1:10j, 0:1:10j]
+    vol = dvr_gl.Volume((100 * np.exp(-((x - .5) ** 2 + (y - .5) ** 2 + (z - .5) ** 2) / 0.1)).astype(np.float32))
+    tf = dvr_gl.TransferFunction([(0, 0.9, 0.5, 0.1), (100, 0.1, 0.5, 0.9)], [(0, 0.05), (100, 0.5)],
+                                 unit_distance=2.0)
+    direction = np.array([-0.1, 0.9, -0.45])
+    direction /= np.linalg.norm(direction)
+    fov = float(np.degrees(2 * np.arctan(9 / distance)))
+    scene = dvr_gl.Scene(vol, tf, dvr_gl.Camera(4.5 + direction * distance, (4.5, 4.5, 4.5), fov=fov), 32, 32)
+    for technique, opts, bound in (("slice2d", {}, 1e-4), ("splat", {"kernel": "gaussian"}, 1e-4),
+                                   ("particles", {"seed": 1}, 1e-4)):
+        gl = renderer.render(scene, technique=technique, **opts)
+        ref = reference.render(scene, technique=technique, **opts)
+        assert ref[..., 3].max() > 0.3, technique
+        assert np.abs(gl - ref).max() < bound, (technique, float(np.abs(gl - ref).max()))
+
+
+def test_slice3d_of_a_box_thinner_than_a_step_is_the_gap_pass(renderer):
+    """No slice plane falls inside a box 1 unit deep along the view at a step of 2: every
+    ray is integrated by the gap pass (which used to be skipped, leaving the image empty
+    where the reference and exact have alpha 0.8). GL against reference within 1e-4,
+    and the reference within the midpoint rule's error of exact on this linear field."""
+    z, y, x = np.mgrid[0:1:2j, 0:1:8j, 0:1:8j]
+    vol = dvr_gl.Volume((50 + 50 * x * y).astype(np.float32))
+    tf = dvr_gl.TransferFunction([(0, 0.9, 0.5, 0.1), (100, 0.1, 0.5, 0.9)], [(0, 0.4), (100, 0.8)],
+                                 unit_distance=1.0)
+    scene = dvr_gl.Scene(vol, tf, dvr_gl.Camera((3.5, 3.5, 10.2), (3.5, 3.5, 0.0), fov=50.0), 24, 24)
+    from dvr_gl.techniques import slice3d
+    assert slice3d.make_plan(scene, 2.0).count == 0
+    gl = renderer.render(scene, technique="slice3d", step=2.0)
+    ref = reference.render(scene, technique="slice3d", step=2.0)
+    assert ref[..., 3].max() > 0.8
+    assert np.abs(gl - ref).max() < 1e-4
+    assert metrics.rmse(ref, reference.exact(scene)) < 1e-2
+
+
+def test_sabella_peak_on_a_plateau_is_its_first_point(renderer):
+    """A constant field under Sabella's model: the peak is the plateau's first point on
+    each ray (the contract's tie rule). The reference's interpolation used to return the
+    plateau value +- 1 ulp, so its peak search took a random sample and its depth-faded
+    saturation was off by 0.31. Reference, GL and exact now agree: the reference within
+    the midpoint rule's 3e-3 of exact here, GL within 1e-5 of the reference."""
+    s = 1.6097516036551733
+    vol = dvr_gl.Volume(np.full((21, 7, 20), 1082, np.uint16), spacing=(s, s, s))
+    tf = dvr_gl.TransferFunction([(1000.0, 0.6073, 0.8693, 0.4383), (1200.0, 0.2443, 0.0179, 0.9959)],
+                                 [(1000.0, 0.3789), (1200.0, 0.7574)], unit_distance=0.781)
+    centre = vol.bounds[0] + vol.extent / 2
+    cam = dvr_gl.Camera(centre + (68.0, 0, 0), centre, up=(0, 1, 0), fov=40.0)
+    scene = dvr_gl.Scene(vol, tf, cam, 10, 40, optical_model="sabella")
+    opts = dict(step=0.4024, ert_transmittance=0.0)
+    ref = reference.render(scene, **opts)
+    assert np.abs(ref - reference.exact(scene)).max() < 3e-3
+    assert np.abs(renderer.render(scene, **opts) - ref).max() < 1e-5
+
+
+@pytest.mark.parametrize("technique, opts", [("raycast", {"step": 0.2, "ert_transmittance": 0.0}),
+                                             ("slice3d", {"step": 0.2}), ("slice2d", {}), ("splat", {})])
+def test_rays_lying_in_a_face_plane_are_in_the_closed_box(renderer, technique, opts):
+    """The eye on the plane of the box's upper y face, the middle row of an odd-height
+    image parallel to it: those rays lie in the closed box, as exact and GL have them.
+    The references lost them (the origin, made relative to the box's corner, rounded
+    just outside the face): 1.0 per pixel. GL against reference within 1e-4 now, and the
+    row as opaque as exact."""
+    s = 0.8952079109917946
+    vol = dvr_gl.Volume(np.full((2, 5, 23), 1.0, np.float32), spacing=(s, s, s),
+                        origin=(37.888256345129236, 16.364832830530545, 5.529244782430439))
+    lo, hi = vol.bounds
+    tf = dvr_gl.TransferFunction([(0, 1, 0.5, 0.2), (2, 1, 0.5, 0.2)], [(0, 0.5), (2, 0.5)], unit_distance=1.0)
+    eye = np.array([lo[0] - 20, hi[1], 0.5 * (lo[2] + hi[2])])
+    scene = dvr_gl.Scene(vol, tf, dvr_gl.Camera(eye, eye + [1, 0, 0], up=(0, 1, 0), fov=40.0), 23, 37)
+    ref = reference.render(scene, technique=technique, **opts)
+    assert ref[18, 11, 3] > 0.99 and reference.exact(scene)[18, 11, 3] > 0.99
+    assert np.abs(renderer.render(scene, technique=technique, **opts) - ref).max() < 1e-4

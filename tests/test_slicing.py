@@ -26,14 +26,18 @@ def slice_tolerance(plan):
     into a colour error through the table's steepest slope; opacity correction adds
     ~64u. Each slice contributes one blended sample; errors add at most linearly over the
     slices (blend weights <= 1)."""
+    return per_slice_tolerance(plan) * plan.count
+
+
+def per_slice_tolerance(plan):
+    """One blended sample's share of ``slice_tolerance``."""
     v = plan.scene.volume
     vals = v.values()
     jump = max(float(np.abs(np.diff(vals, axis=a)).max()) for a in range(3))
     value_err = 4 * U32 * float(v.dims.max()) * jump + 16 * U32 * float(np.abs(vals).max())
     table = plan.lut.table.astype(np.float64)
     slope = float(np.abs(np.diff(table, axis=0)).max()) * plan.lut.scale
-    per_slice = slope * value_err + 2 * U32 * plan.lut.size * slope / plan.lut.scale + 64 * U32
-    return per_slice * plan.count
+    return slope * value_err + 2 * U32 * plan.lut.size * slope / plan.lut.scale + 64 * U32
 
 
 def render_both(renderer, scene, technique, **opts):

@@ -429,3 +429,21 @@ def test_depth_ranges_restart_and_cells_behind_the_eye_get_their_own_draws(rende
         monkeypatch.undo()
         assert whole[..., 3].max() > 0.3
         assert np.abs(chunked - whole).max() == 0.0
+
+
+@pytest.mark.parametrize("azimuth", [0, 60, 120])
+def test_sliver_cells_of_near_coincident_points_keep_their_values(renderer, azimuth):
+    """Points duplicated 1e-7 apart make sliver cells whose gradients reach 3e7: the
+    field extrapolated in float32 from the eye left the cell's vertex range by 10 data
+    units, and a TF opaque only outside the data's range painted opaque pixels (alpha 1
+    where the reference has 0.04). The ends are now clamped to the cell's vertex range
+    (a linear field's extremes): GL within this module's bound of the reference."""
+    rng = np.random.default_rng(3)
+    base = rng.uniform(-1, 1, (20, 3))
+    points = np.concatenate([base, base[:7] + rng.normal(size=(7, 3)) * 1e-7])
+    mesh = TetMesh.from_points(points, rng.random(len(points)))
+    tf = TransferFunction([(0, 1, 0.2, 0.2), (2, 1, 0.2, 0.2)], [(0, 0.02), (1.0, 0.02), (1.5, 1.0)], unit_distance=1.0)
+    scene = Scene(mesh, tf, dvr_gl.default_camera(mesh, azimuth=azimuth, elevation=20), 48, 48)
+    ref = dvr_gl.reference.render(scene, technique="tetra")
+    assert ref[..., 3].max() < 0.05
+    assert np.abs(renderer.render(scene, technique="tetra") - ref).max() < GL_TOL

@@ -10,11 +10,13 @@ from __future__ import annotations
 import numpy as np
 
 
-def ray_box(origins, dirs, lo, hi):
+def ray_box(origins, dirs, lo, hi, inside=None):
     """Entry and exit distances of rays against the box [lo, hi] (GLSL ``intersectBox``).
 
     Rays start at their origin: the entry is clamped to 0. A ray parallel to a pair of
-    faces is inside the slab iff its origin is (the 0 * inf case is resolved as such).
+    faces is inside the slab iff its origin is (the 0 * inf case is resolved as such;
+    ``inside``, per ray and axis, when given, says so instead: ``box_rays`` decides it in
+    world coordinates, where a ray in a face plane is exactly on it).
     Returns (t_enter, t_exit); the ray misses where t_exit <= t_enter.
     """
     o = np.asarray(origins, np.float64)
@@ -26,7 +28,8 @@ def ray_box(origins, dirs, lo, hi):
     tmin = np.minimum(ta, tb)
     tmax = np.maximum(ta, tb)
     parallel = d == 0
-    inside = (o >= lo) & (o <= hi)
+    if inside is None:
+        inside = (o >= lo) & (o <= hi)
     tmin = np.where(parallel, np.where(inside, -np.inf, np.inf), tmin)
     tmax = np.where(parallel, np.where(inside, np.inf, -np.inf), tmax)
     t0 = np.maximum(tmin.max(axis=-1), 0.0)
@@ -37,11 +40,14 @@ def ray_box(origins, dirs, lo, hi):
 def box_rays(scene):
     """Every pixel's ray, flattened and relative to the volume box's lower corner (as the
     shaders see them): origins and unit directions (n, 3), entry and exit distances."""
-    lo, _ = scene.volume.bounds
+    lo, hi = scene.volume.bounds
     origins, dirs = scene.camera.rays(scene.width, scene.height)
     o = (origins - lo).reshape(-1, 3)
     d = dirs.reshape(-1, 3)
-    t0, t1 = ray_box(o, d, np.zeros(3), scene.volume.extent)
+    # a ray lying in a face plane is in the closed box: decided before the subtraction,
+    # which can round an origin on the upper face to just outside it
+    world = origins.reshape(-1, 3)
+    t0, t1 = ray_box(o, d, np.zeros(3), scene.volume.extent, inside=(world >= lo) & (world <= hi))
     return o, d, t0, t1
 
 
@@ -61,11 +67,17 @@ def trilinear(values, idx):
     x0, y0, z0 = i0[..., 0], i0[..., 1], i0[..., 2]
     fx, fy, fz = f[..., 0], f[..., 1], f[..., 2]
     v = values
-    c00 = v[z0, y0, x0] * (1 - fx) + v[z0, y0, x0 + 1] * fx
-    c10 = v[z0, y0 + 1, x0] * (1 - fx) + v[z0, y0 + 1, x0 + 1] * fx
-    c01 = v[z0 + 1, y0, x0] * (1 - fx) + v[z0 + 1, y0, x0 + 1] * fx
-    c11 = v[z0 + 1, y0 + 1, x0] * (1 - fx) + v[z0 + 1, y0 + 1, x0 + 1] * fx
-    return (c00 * (1 - fy) + c10 * fy) * (1 - fz) + (c01 * (1 - fy) + c11 * fy) * fz
+
+    def lerp(a, b, t):
+        # exact where a == b: a plateau samples to its value, not a value 1 ulp off
+        # (a Sabella peak search took a random sample of a plateau for its first)
+        return a + (b - a) * t
+
+    c00 = lerp(v[z0, y0, x0], v[z0, y0, x0 + 1], fx)
+    c10 = lerp(v[z0, y0 + 1, x0], v[z0, y0 + 1, x0 + 1], fx)
+    c01 = lerp(v[z0 + 1, y0, x0], v[z0 + 1, y0, x0 + 1], fx)
+    c11 = lerp(v[z0 + 1, y0 + 1, x0], v[z0 + 1, y0 + 1, x0 + 1], fx)
+    return lerp(lerp(c00, c10, fy), lerp(c01, c11, fy), fz)
 
 
 def cell_is_valid(volume, idx):

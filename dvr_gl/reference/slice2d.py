@@ -27,11 +27,19 @@ def render_plan(plan, lut_exact=False):
         with np.errstate(divide="ignore", invalid="ignore"):
             return (j * plan.slice_distance - o[:, w]) / d[:, w]
 
+    # a ray parallel to a face lies in the closed box where its origin does, decided in
+    # world coordinates (as box_rays does: the subtraction may round it off the face)
+    world = cam.rays(W, H)[0].reshape(-1, 3)
+    in_world = (world >= volume.bounds[0]) & (world <= volume.bounds[1])
+
+    def within(p, axis):
+        return np.where(d[:, axis] == 0, in_world[:, axis], (p[:, axis] >= 0) & (p[:, axis] <= extent[axis]))
+
     def inside(j, t):
         p = o + t[:, None] * d
         with np.errstate(invalid="ignore"):
             ok = (j >= 0) & (j < plan.count) & (t * cos_theta >= plan.min_depth) & moving
-            ok &= (p[:, u] >= 0) & (p[:, u] <= extent[u]) & (p[:, v] >= 0) & (p[:, v] <= extent[v])
+            ok &= within(p, u) & within(p, v)
         return ok
 
     def sample(j, t):

@@ -59,7 +59,15 @@ def render_plan(plan, lut_exact=False):
         drawn = np.any(src != 0, axis=1)       # GL discards all-zero fragments
         acc[rows[drawn]] = blend_over(acc[rows[drawn]], src[drawn], plan.target)
 
-    # the gap pass: rays that meet no slice inside the box get their whole chord
+    gap_rays_pass(acc, plan, (o, d, t0, t1), lut_exact)
+    return acc.reshape(H, W, 4)
+
+
+def gap_rays_pass(acc, plan, rays, lut_exact=False):
+    """The gap pass (GLSL slice3d.frag with GAP): the rays that meet no slice inside the
+    box get their whole chord, blended into ``acc``. Sheet-buffer splatting's too."""
+    o, d, t0, t1 = rays
+    cos_theta = d @ plan.scene.camera.forward
     per_t = np.ones(len(o)) if plan.shells else cos_theta
     gap = (t1 > t0) & ((t1 - t0) * per_t <= 2 * plan.step)
     k_far = np.ceil((plan.far_depth - np.where(gap, t1, 0) * per_t) / plan.step).astype(np.int64)
@@ -69,4 +77,3 @@ def render_plan(plan, lut_exact=False):
             t = (plan.far_depth - k * plan.step) / per_t
         gap &= ~((k >= 0) & (k < plan.count) & (t > 0) & (t >= t0) & (t <= t1))
     gap_pass(acc, gap, (o, d, t0, t1), plan, plan.step, lut_exact)
-    return acc.reshape(H, W, 4)

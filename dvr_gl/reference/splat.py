@@ -115,6 +115,9 @@ def _render_tent(plan, lut_exact):
         src = segment_of(rgba, clear, length)
         drawn = np.any(src != 0, axis=1)       # GL discards all-zero fragments
         acc[rows[drawn]] = blend_under(acc[rows[drawn]], src[drawn], plan.target)
+    # rays that cross no sheet inside the box: 3D slicing's gap pass on the same planes
+    from .slice3d import gap_rays_pass
+    gap_rays_pass(acc, plan.gap, (o, d, t0, t1), lut_exact)
     return acc.reshape(H, W, 4)
 
 

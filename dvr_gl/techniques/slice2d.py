@@ -58,7 +58,7 @@ import numpy as np
 from ..cache import TableCache
 from ..scene import Scene
 from ..transfer import LookupTable
-from .common import (cleared_target, add_optional_inputs, shading_defines, bind, box_depth_range, camera_uniforms, check_flag,
+from .common import (cleared_target, add_optional_inputs, shading_defines, bind, box_depth_range, camera_uniforms, near_plane, check_flag,
                      draw_box_instances,
                      check_scene, check_target, eye_view_projection, preintegration_table, tf_uniforms,
                      volume_uniforms)
@@ -136,8 +136,13 @@ def make_plan(scene, step=None, *, target="rgba32f", interpolate=0, preintegrate
                        target=target, preint=preint, defines=defines)
 
 
+def _far_plane(scene):
+    _, dmax = box_depth_range(scene)
+    return max(dmax, 0.0) * 1.01 + 1e-3 * float(np.linalg.norm(scene.volume.extent))
+
+
 def _near_plane(scene):
-    return 1e-6 * float(np.linalg.norm(scene.volume.extent))
+    return near_plane(scene, _far_plane(scene))
 
 
 # ---------------------------------------------------------------------------------------
@@ -179,7 +184,7 @@ def draw(renderer, plan):
     if scene.camera.is_ortho:
         view_proj = eye_view_projection(scene, -margin, dmax + margin)
     else:
-        view_proj = eye_view_projection(scene, _near_plane(scene), max(dmax, 0.0) * 1.01 + margin)
+        view_proj = eye_view_projection(scene, _near_plane(scene), _far_plane(scene))
     prog["u_view_proj"].write(view_proj.astype("f4").tobytes())
 
     fbo = cleared_target(renderer, scene, plan.target)

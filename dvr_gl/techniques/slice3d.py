@@ -157,21 +157,20 @@ def draw(renderer, plan):
         vertex_shader = "common/slice_polygons.vert"
     prog = renderer.programs.get(vertex_shader, "slice3d/slice3d.frag", plan.defines)
 
-    textures = {"t_volume": renderer.volume_texture(volume), "t_tf": renderer.tf_texture(plan.lut)}
-    uniforms = {**camera_uniforms(scene), **volume_uniforms(volume), **tf_uniforms(plan.lut, scene.tf),
-                "u_far_depth": plan.far_depth, "u_step": plan.step, "u_slice_count": plan.count}
-    add_optional_inputs(renderer, plan, textures, uniforms)
+    textures, uniforms = _inputs(renderer, plan)
     bind(prog, textures, uniforms)
 
     fbo = cleared_target(renderer, scene, plan.target)
-    if plan.count == 0:
-        return fbo
     ctx.disable(ctx.DEPTH_TEST | ctx.CULL_FACE)
     ctx.enable(ctx.BLEND)
     ctx.blend_func = ctx.ONE, ctx.ONE_MINUS_SRC_ALPHA
     ctx.blend_equation = ctx.FUNC_ADD
     try:
-        if plan.shells:
+        # with no plane inside the box (a box thinner along the view than a step), every
+        # ray is the gap pass's
+        if plan.count == 0:
+            pass
+        elif plan.shells:
             draw_box_instances(renderer, prog, scene, plan.count)
         elif plan.proxy == "vertex":
             corners = inflated_corners(volume)
@@ -184,9 +183,27 @@ def draw(renderer, plan):
             positions, slices, _ = plane_triangles(scene, plan.far_depth, plan.step, plan.count)
             prog["u_view_proj"].write(plane_projection(plan).astype("f4").tobytes())
             renderer.stream_vao(prog, "slice3d_cpu", positions, slices).render(ctx.TRIANGLES)
-        gap = renderer.programs.get("common/box_instances.vert", "slice3d/slice3d.frag", {**plan.defines, "GAP": 1})
-        bind(gap, textures, uniforms)
-        draw_box_instances(renderer, gap, scene, 1)
+        draw_gap(renderer, plan, (textures, uniforms))
     finally:
         ctx.disable(ctx.BLEND | ctx.CULL_FACE)
     return fbo
+
+
+def _inputs(renderer, plan):
+    scene = plan.scene
+    volume = scene.volume
+    textures = {"t_volume": renderer.volume_texture(volume), "t_tf": renderer.tf_texture(plan.lut)}
+    uniforms = {**camera_uniforms(scene), **volume_uniforms(volume), **tf_uniforms(plan.lut, scene.tf),
+                "u_far_depth": plan.far_depth, "u_step": plan.step, "u_slice_count": plan.count}
+    add_optional_inputs(renderer, plan, textures, uniforms)
+    return textures, uniforms
+
+
+def draw_gap(renderer, plan, inputs=None):
+    """The gap pass into the bound target, blending over it: every ray that meets no
+    plane inside the box gets its whole chord (``shaders/common/slice_gap.glsl``). Sheet-
+    buffer splatting, whose sheets are these planes, draws it too."""
+    textures, uniforms = inputs or _inputs(renderer, plan)
+    gap = renderer.programs.get("common/box_instances.vert", "slice3d/slice3d.frag", {**plan.defines, "GAP": 1})
+    bind(gap, textures, uniforms)
+    draw_box_instances(renderer, gap, plan.scene, 1)

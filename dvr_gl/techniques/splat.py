@@ -262,6 +262,8 @@ class TentPlan:
     splat_defines: dict = field(default_factory=dict)  # the splat pass's
     gradients: np.ndarray | None = None   # lit: (N, 3) float32, the gradient at each sample
     kernel: str = "tent"
+    gap: object = None      # the slice3d plan of the same planes: its gap pass fills the
+                            # rays that cross no sheet inside the box
 
     @property
     def step(self):
@@ -303,8 +305,10 @@ def _tent_plan(scene, density, sheet_spacing, skip_empty, target, tables):
     gradients = None
     if scene.shading:      # once per set of samples
         gradients = tables.get("tent_gradients", samples, volume, make=tent_gradients)
+    from . import slice3d
+    gap = slice3d.make_plan(scene, float(sheet_spacing), target=target, tables=tables)
     return TentPlan(scene=scene, samples=samples, sheets=sheets, lut=lut, density=density, skip_empty=skip_empty,
-                    target=target, defines=defines, splat_defines=splat_defines, gradients=gradients)
+                    target=target, defines=defines, splat_defines=splat_defines, gradients=gradients, gap=gap)
 
 
 def occupied_cells(volume, lut):
@@ -603,7 +607,7 @@ def _draw_tent(renderer, plan):
     sheets = plan.sheets
     fbo = cleared_target(renderer, scene, plan.target)
     if sheets.count == 0 or not sheets.ranges[:, 1].any():
-        return fbo
+        return _draw_tent_gap(renderer, plan, fbo)
     lit = plan.gradients is not None
     runs = sheets.runs
     splat = renderer.programs.get("splat/tent.vert", "splat/tent.frag", plan.splat_defines)
@@ -663,6 +667,24 @@ def _draw_tent(renderer, plan):
     finally:
         ctx.disable(ctx.BLEND)
         ctx.blend_func = ctx.ONE, ctx.ONE_MINUS_SRC_ALPHA
+    return _draw_tent_gap(renderer, plan, fbo)
+
+
+def _draw_tent_gap(renderer, plan, fbo):
+    """Rays whose chord through the box crosses no sheet (at the silhouette, through
+    edges and corners, a box thinner than the spacing) get their whole chord, as in 3D
+    slicing, whose planes the sheets are; those pixels hold nothing yet."""
+    from . import slice3d
+    ctx = renderer.ctx
+    fbo.use()
+    ctx.disable(ctx.DEPTH_TEST | ctx.CULL_FACE)
+    ctx.enable(ctx.BLEND)
+    ctx.blend_func = ctx.ONE, ctx.ONE_MINUS_SRC_ALPHA
+    ctx.blend_equation = ctx.FUNC_ADD
+    try:
+        slice3d.draw_gap(renderer, plan.gap)
+    finally:
+        ctx.disable(ctx.BLEND)
     return fbo
 
 

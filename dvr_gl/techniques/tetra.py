@@ -190,9 +190,11 @@ class MeshTextures:
 
 
 def cell_fields(mesh):
-    """(M, 2, 4) float64: per cell (gradient of the linear field, value at the centroid)
-    and (centroid, 0), positions relative to the mesh's lower corner. Zero-volume cells
-    get a zero gradient (they are never drawn)."""
+    """(M, 3, 4) float64: per cell (gradient of the linear field, value at the centroid),
+    (centroid, 0), positions relative to the mesh's lower corner, and (smallest, largest
+    vertex value, 0, 0): a fragment clamps its end values to that range, which its
+    float32 extrapolation can leave in a sliver (a gradient of 3e7 made values 10 data
+    units off). Zero-volume cells get a zero gradient (they are never drawn)."""
     topo = topology(mesh)
     lo = mesh.bounds[0]
     p = mesh.points[topo.tets] - lo                 # (M, 4, 3)
@@ -202,10 +204,12 @@ def cell_fields(mesh):
     grad = np.zeros((len(p), 3))
     ok = ~topo.flat
     grad[ok] = np.linalg.solve(A[ok], b[ok][..., None])[..., 0]
-    out = np.zeros((len(p), 2, 4))
+    out = np.zeros((len(p), 3, 4))
     out[:, 0, :3] = grad
     out[:, 0, 3] = s.mean(axis=1)
     out[:, 1, :3] = p.mean(axis=1)
+    out[:, 2, 0] = s.min(axis=1)
+    out[:, 2, 1] = s.max(axis=1)
     return out
 
 
@@ -243,7 +247,10 @@ def draw(renderer, plan):
     prog = renderer.programs.get("tetra/tetra.vert", "tetra/tetra.frag", plan.defines)
     data = renderer.resource("tetra_mesh", mesh, make=lambda: MeshTextures(ctx, mesh), capacity=1)
     order = renderer.resource("tetra_order", make=_OrderTexture, capacity=1).write(ctx, plan.draw)
-    view_proj = data_projection(scene).astype("f4").tobytes()
+    # tetra's own depths are slot numbers; its projection only places the faces of cells
+    # that reach behind the eye, clipped just in front of it
+    view_proj = data_projection(scene, near=None if scene.camera.is_ortho else
+                                1e-6 * float(np.linalg.norm(mesh.extent))).astype("f4").tobytes()
 
     # the outline pass: every cell's grown outline in window coordinates (outline.frag)
     outline = renderer.resource("tetra_outline", make=lambda: _OutlineTarget(ctx), capacity=1).get(

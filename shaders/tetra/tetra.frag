@@ -39,6 +39,7 @@
 flat in mat3x4 v_normals;      // the cell's outward plane normals, by component (tetra.vert)
 flat in vec4 v_room;           // plane offsets from the eye: d - n . eye
 flat in vec4 v_field;          // gradient of the linear field, value at the eye
+flat in vec2 v_range;          // the cell's smallest and largest vertex value
 uniform vec3 u_centre;          // the mean of the mesh's points (relative to its lower corner)
 
 out vec4 frag_color;
@@ -85,8 +86,10 @@ void main() {
     if (t_out <= t_in) discard;
     float rate = dot(v_field.xyz, dir);
     float s_at_start = v_field.w + dot(v_field.xyz, offset);
-    float s_front = s_at_start + t_in * rate;
-    float s_back = s_at_start + t_out * rate;
+    // a linear field takes its extremes at the vertices: float32 extrapolation from the
+    // eye may not (slivers have huge gradients), so the ends are clamped to the range
+    float s_front = clamp(s_at_start + t_in * rate, v_range.x, v_range.y);
+    float s_back = clamp(s_at_start + t_out * rate, v_range.x, v_range.y);
 #if MODE_MIP
     frag_color = vec4(max(s_front, s_back), 0.0, 0.0, 1.0);           // blended with MAX
 #elif MODE_MINIP
