@@ -447,3 +447,22 @@ def test_sliver_cells_of_near_coincident_points_keep_their_values(renderer, azim
     ref = dvr_gl.reference.render(scene, technique="tetra")
     assert ref[..., 3].max() < 0.05
     assert np.abs(renderer.render(scene, technique="tetra") - ref).max() < GL_TOL
+
+
+@pytest.mark.parametrize("ortho", [True, False])
+def test_rays_in_a_boundary_face_plane_of_an_odd_sized_image(renderer, ortho):
+    """The eye on the plane of a convex mesh's lower y face, looking along it: the middle
+    row of a 47-pixel-high image lies in that plane, inside the closed cells (exact and
+    the reference have it). The shader's pixel centre used to come out 1e-7 off the
+    plane (c * (2 / n) - 1 in float32), so the whole row was dropped; now within this
+    module's bound of the reference."""
+    g = np.stack(np.meshgrid(*[np.arange(3) * s for s in (0.59, 0.685, 0.475)], indexing="ij"), -1).reshape(-1, 3)
+    mesh = TetMesh.from_points(g, g @ [0.3, 0.5, 0.2])
+    lo, hi = mesh.bounds
+    tf = TransferFunction([(0, 0.9, 0.4, 0.1), (2, 0.1, 0.4, 0.9)], [(0, 0.5), (2, 0.5)], unit_distance=1.0)
+    eye, target = (lo[0] - 2, lo[1], 0.5 * (lo[2] + hi[2])), (hi[0], lo[1], 0.5 * (lo[2] + hi[2]))
+    cam = Camera(eye, target, ortho_height=2.0) if ortho else Camera(eye, target, fov=40.0)
+    scene = Scene(mesh, tf, cam, 38, 47)
+    ref = dvr_gl.reference.render(scene, technique="tetra")
+    assert ref[23, :, 3].max() > 0.5
+    assert np.abs(renderer.render(scene, technique="tetra") - ref).max() < GL_TOL

@@ -26,7 +26,10 @@ vec2 pixelCoord() {
 }
 
 void pixelRay(out vec3 origin, out vec3 dir) {
-    vec2 ndc = (gl_FragCoord.xy + u_tile_origin) * (2.0 / u_viewport) - 1.0;
+    // (2 c - n) / n: the numerator is exact (pixel centres are half-integers), so the
+    // middle row or column of an odd-sized image gets ndc exactly 0, as the NumPy twin's;
+    // c * (2 / n) - 1 left it 1e-7 off, and a ray meant to lie in a face plane missed it
+    vec2 ndc = (2.0 * (gl_FragCoord.xy + u_tile_origin) - u_viewport) / u_viewport;
     vec3 offset = (ndc.x * u_screen.x) * u_right + (ndc.y * u_screen.y) * u_up;
 #if ORTHO
     origin = u_eye + offset;
