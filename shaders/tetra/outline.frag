@@ -16,6 +16,8 @@ uniform vec2 u_target_size;   // pixels of the image target (a tile's, with tile
 uniform float u_inflate;      // pixels the outline grows by: twice the vertex snapping
 uniform int u_slots;          // cells drawn
 
+const float MITER_CAP = 1024.0;   // pixels
+
 layout(location = 0) out vec4 f_corners01;
 layout(location = 1) out vec4 f_corners23;
 
@@ -29,10 +31,15 @@ float cross2(vec2 a, vec2 b) {
 
 // Window-space move of corner a of the outline (convex hull) of a and the cell's three
 // other projected corners b, c, d: along the outward normals of the two hull edges at a,
-// by u_inflate, to where the moved edges meet (a miter, capped at 2.8 times that at sharp
-// corners, whose tips are too thin to matter); none for a corner inside the outline or
-// an outline without area. Written out for the three candidate edges (no arrays indexed
-// at run time: llvmpipe spills those to memory).
+// by u_inflate, to where the moved edges meet (a miter); none for a corner inside the
+// outline or an outline without area. Written out for the three candidate edges (no
+// arrays indexed at run time: llvmpipe spills those to memory).
+// The miter is long at a sharp corner (u_inflate / sin(half the angle)), and it must be:
+// a cell seen grazing projects to a needle (0.004 by 7 pixels), and only the miters at
+// its two tips move its long edges out; capped at 2.8 u_inflate they hardly moved, and
+// pixel centres just inside the needle were lost (a thin slab dropped cells). The cap is
+// MITER_CAP pixels: the spike a long miter adds is a sliver with few pixel centres, each
+// discarded by the fragment's own clipping.
 vec2 hullEdgeNormal(vec2 a, vec2 q, vec2 r1, vec2 r2, inout int found) {
     vec2 edge = q - a;
     // q projects onto a (within far less than the growth): a's edges go to the others
@@ -56,7 +63,9 @@ vec2 outlineShift(vec2 a, vec2 b, vec2 c, vec2 d) {
     if (found != 2) return vec2(0.0);
     vec2 n1 = nb != vec2(0.0) ? nb : nc;
     vec2 n2 = nd != vec2(0.0) ? nd : nc;
-    return u_inflate * (n1 + n2) / max(1.0 + dot(n1, n2), 0.25);
+    vec2 miter = u_inflate * (n1 + n2) / max(1.0 + dot(n1, n2), 1e-12);
+    float reach = length(miter);
+    return reach > MITER_CAP ? miter * (MITER_CAP / reach) : miter;
 }
 
 void main() {
