@@ -503,3 +503,40 @@ class SizedTarget:
                 self.fbo.depth_attachment.release()
             self.fbo.release()
             self.fbo = None
+
+
+class RepeatedIndices:
+    """An index buffer that repeats ``pattern`` (indices into a group of ``stride``
+    vertices) for groups 0, 1, ...: index ``stride * k + p``, grown (never shrunk) as
+    needed, with one attribute-less vertex array per program. Vertex shaders place their
+    vertices by ``gl_VertexID``; indexing shades each vertex once (GL reuses a vertex
+    repeated within a draw's index window)."""
+
+    def __init__(self, ctx, pattern, stride=4, minimum=1):
+        self.ctx = ctx
+        self.pattern = np.asarray(pattern, np.int64).ravel()
+        self.stride = int(stride)
+        self.minimum = int(minimum)
+        self.groups = 0
+        self.ibo = None
+        self.vaos = {}
+
+    def vao(self, prog, groups):
+        """The vertex array of ``prog`` over at least ``groups`` groups."""
+        if groups > self.groups:
+            self.release()
+            self.groups = max(int(groups), 2 * self.groups, self.minimum)
+            index = self.stride * np.arange(self.groups, dtype=np.int64)[:, None] + self.pattern
+            self.ibo = self.ctx.buffer(index.astype(np.int32).tobytes())
+        vao = self.vaos.get(prog.glo)
+        if vao is None:
+            vao = self.vaos[prog.glo] = self.ctx.vertex_array(prog, [], index_buffer=self.ibo, index_element_size=4)
+        return vao
+
+    def release(self):
+        for vao in self.vaos.values():
+            vao.release()
+        self.vaos.clear()
+        if self.ibo is not None:
+            self.ibo.release()
+            self.ibo = None

@@ -134,7 +134,8 @@ from ..reference.common import cell_is_valid, trilinear
 from ..scene import Scene
 from ..transfer import LookupTable
 from . import proxy as proxy_geometry
-from .common import (SizedTarget, bind, camera_uniforms, check_flag, check_scene, check_step, check_target,
+from .common import (RepeatedIndices, SizedTarget, bind, camera_uniforms, check_flag, check_scene, check_step,
+                     check_target,
                      cleared_target, data_projection, plane_projection, plane_triangles, point_shading_defines,
                      sample_term_uniforms, tf_uniforms)
 from ..particles import extinction
@@ -147,6 +148,7 @@ DATA = ("volume", "mesh")
 KERNELS = ("tent", "gaussian")
 DEFAULT_RADIUS = 0.4
 DEFAULT_CUTOFF = 3.0
+QUAD_TRIANGLES = (0, 1, 2, 2, 1, 3)   # a quad's two triangles from its corners 0 .. 3
 # Tent quads are grown by this many pixels on every side: many times the rasteriser's
 # vertex snapping (1/256 pixel on llvmpipe, grow_pixels) and the float32 rounding of their
 # corners, so every pixel centre inside a support is covered whatever the tile; pixels
@@ -561,38 +563,6 @@ class _TentTextures:
         self.order.release()
 
 
-class _Quads:
-    """Two triangles per quad, indexed: quad q's corners are vertices 4q .. 4q + 3
-    (shaders/splat/tent.vert places them by gl_VertexID), so the vertex cache shades
-    each corner once instead of once per triangle. Grown (never shrunk) as needed."""
-
-    def __init__(self, ctx):
-        self.ctx = ctx
-        self.ibo = None
-        self.capacity = 0
-        self.vaos = {}
-
-    def vao(self, prog, quads):
-        if quads > self.capacity:
-            self.release()
-            self.capacity = max(quads, 2 * self.capacity, 1024)
-            pattern = np.array([0, 1, 2, 2, 1, 3], np.uint32)
-            index = (4 * np.arange(self.capacity, dtype=np.uint32)[:, None] + pattern).ravel()
-            self.ibo = self.ctx.buffer(index.tobytes())
-        vao = self.vaos.get(prog.glo)
-        if vao is None:
-            vao = self.vaos[prog.glo] = self.ctx.vertex_array(prog, [], index_buffer=self.ibo, index_element_size=4)
-        return vao
-
-    def release(self):
-        for vao in self.vaos.values():
-            vao.release()
-        self.vaos.clear()
-        if self.ibo is not None:
-            self.ibo.release()
-            self.ibo = None
-
-
 def _rows_texture(ctx, array, dtype):
     from .tetra import TEXEL_ROW_WIDTH, texture_rows
     rows = texture_rows(np.ascontiguousarray(array, np.int32 if dtype == "i4" else np.float32))
@@ -643,7 +613,9 @@ def _draw_tent(renderer, plan):
     classify["u_view_proj"].write(view_proj)
     positions, index, polygon = plane_triangles(scene, sheets.far_depth, sheets.spacing, sheets.count)
     polygons = renderer.stream_vao(classify, "splat_sheets", positions, index)
-    quads = renderer.resource("splat_quads", make=lambda: _Quads(ctx), capacity=1).vao(
+    # two triangles per quad; quad q's corners are vertices 4q .. 4q + 3 (tent.vert)
+    quads = renderer.resource("splat_quads", make=lambda: RepeatedIndices(ctx, QUAD_TRIANGLES, minimum=1024),
+                              capacity=1).vao(
         splat, int(sheets.ranges[:, 1].max()))
 
     ctx.disable(ctx.DEPTH_TEST | ctx.CULL_FACE)

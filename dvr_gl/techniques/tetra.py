@@ -48,8 +48,8 @@ from ..cache import TableCache
 from ..mesh import LOCAL_FACES, Order, centroid_order, mpvo_order, topology, visible_cells
 from ..reference.linear_segment import SegmentKnots
 from ..scene import OPTICAL_MODELS, Scene
-from .common import (sample_term_uniforms, cleared_target, SizedTarget, bind, camera_uniforms, check_scene, check_target, data_projection,
-                     grow_pixels, knot_uniforms)
+from .common import (sample_term_uniforms, cleared_target, RepeatedIndices, SizedTarget, bind, camera_uniforms,
+                     check_scene, check_target, data_projection, grow_pixels, knot_uniforms)
 
 MODES = ("composite", "mip", "minip", "average")
 TAKES_STEP = False
@@ -282,7 +282,9 @@ def draw(renderer, plan):
     bind(prog, textures, uniforms)
     knot_uniforms(prog, plan.knots, plan.defines["KNOT_CAPACITY"])
     prog["u_view_proj"].write(view_proj)
-    vao = renderer.resource("tetra_faces", make=lambda: _FaceIndices(ctx), capacity=1).vao(prog, plan.draw.size)
+    # the four faces of every drawn cell from its four vertices 4k .. 4k + 3 (tetra.vert)
+    vao = renderer.resource("tetra_faces", make=lambda: RepeatedIndices(ctx, LOCAL_FACES), capacity=1).vao(
+        prog, plan.draw.size)
     ctx.enable(ctx.BLEND | ctx.CULL_FACE)
     ctx.depth_func = ">"
     ctx.cull_face = "front"
@@ -375,35 +377,3 @@ class _DepthFramebuffer:
     def release(self):
         self.fbo.release()
         self.depth.release()
-
-
-class _FaceIndices:
-    """The index buffer 4k + LOCAL_FACES for cells k = 0, 1, ...: the four faces of every
-    drawn cell from its four vertices, so each vertex is shaded once (GL reuses a vertex
-    repeated within a draw's index window). Independent of the order; grown as needed."""
-
-    def __init__(self, ctx):
-        self.ctx = ctx
-        self.cells = 0
-        self.ibo = None
-        self.vaos = {}
-
-    def vao(self, prog, cells):
-        if cells > self.cells:
-            self.release()
-            self.cells = max(cells, 2 * self.cells)
-            idx = (4 * np.arange(self.cells, dtype=np.int64)[:, None] + LOCAL_FACES.reshape(1, 12))
-            self.ibo = self.ctx.buffer(idx.astype(np.int32).tobytes())
-        vao = self.vaos.get(prog.glo)
-        if vao is None:
-            vao = self.vaos[prog.glo] = self.ctx.vertex_array(prog, [], index_buffer=self.ibo,
-                                                              index_element_size=4)
-        return vao
-
-    def release(self):
-        for vao in self.vaos.values():
-            vao.release()
-        self.vaos.clear()
-        if self.ibo is not None:
-            self.ibo.release()
-            self.ibo = None
