@@ -109,16 +109,17 @@ class ProgramCache:
         self._programs = {}
         self.sources = {}  # key -> (vertex source, fragment source), for tests and debugging
 
-    def get(self, vertex: str, fragment: str, defines: dict | None = None):
+    def get(self, vertex: str, fragment: str, defines: dict | None = None, geometry: str | None = None):
         defines = dict(defines or {})
-        key = (vertex, fragment, tuple(sorted(defines.items())))
+        key = (vertex, fragment, tuple(sorted(defines.items()))) + ((geometry,) if geometry else ())
         prog = self._programs.get(key)
         if prog is None:
             vs = build_source(vertex, _only_declared(vertex, defines))
             fs = build_source(fragment, defines)
-            prog = self.ctx.program(vertex_shader=vs, fragment_shader=fs)
+            gs = None if geometry is None else build_source(geometry, _only_declared(geometry, defines))
+            prog = self.ctx.program(vertex_shader=vs, fragment_shader=fs, geometry_shader=gs)
             self._programs[key] = prog
-            self.sources[key] = (vs, fs)
+            self.sources[key] = (vs, fs) if gs is None else (vs, fs, gs)
         return prog
 
     def release(self):

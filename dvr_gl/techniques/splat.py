@@ -806,8 +806,9 @@ def _draw_gaussian(renderer, plan):
     fbo = cleared_target(renderer, scene, plan.target)
     if plan.splats.count == 0:
         return fbo
-    prog = renderer.programs.get("splat/splat.vert", "splat/splat.frag", plan.defines)
-    uniforms = {**camera_uniforms(scene), **plan.kernel_uniforms(), "u_pixels_per_unit": pixels_per_unit(scene)}
+    prog = renderer.programs.get("splat/splat.vert", "splat/splat.frag", plan.defines, geometry="splat/splat.geom")
+    uniforms = {**camera_uniforms(scene), **plan.kernel_uniforms(), "u_pixels_per_unit": pixels_per_unit(scene),
+                "u_target_size": tuple(float(x) for x in fbo.size)}
     if scene.shading:
         uniforms.update(sample_term_uniforms(renderer, scene, plan.defines))
     bind(prog, {}, uniforms)
@@ -815,12 +816,12 @@ def _draw_gaussian(renderer, plan):
     gpu = renderer.resource("splat_vbo", plan.splats, prog,
                             make=lambda: _SplatBuffers(ctx, prog, plan.splats, plan.gradients), capacity=1)
     vao = gpu.ordered(plan.order)
-    ctx.disable(ctx.DEPTH_TEST)
-    ctx.enable(ctx.BLEND | ctx.PROGRAM_POINT_SIZE)
+    ctx.disable(ctx.DEPTH_TEST | ctx.CULL_FACE)
+    ctx.enable(ctx.BLEND)
     ctx.blend_func = ctx.ONE, ctx.ONE_MINUS_SRC_ALPHA
     ctx.blend_equation = ctx.FUNC_ADD
-    vao.render(ctx.POINTS, vertices=int(plan.order.size))
-    ctx.disable(ctx.BLEND | ctx.PROGRAM_POINT_SIZE)
+    vao.render(ctx.POINTS, vertices=int(plan.order.size))      # splat.geom makes each a square
+    ctx.disable(ctx.BLEND)
     return fbo
 
 

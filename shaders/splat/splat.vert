@@ -1,5 +1,7 @@
-// Splatting: every classified sample a Gaussian kernel, drawn as a point sprite large
-// enough for the kernel's truncation ellipsoid (bounded by a sphere of u_reach).
+// Splatting: every classified sample a Gaussian kernel, drawn as a square sprite large
+// enough for the kernel's truncation ellipsoid (bounded by a sphere of u_reach); splat.geom
+// makes the square (GL's point sprites are capped in size: 255 pixels on llvmpipe, which
+// cut coarse meshes' kernels at 512x512).
 #version 330 core
 
 #include "common/sprite.glsl"
@@ -18,21 +20,22 @@ uniform vec3 u_forward;
 uniform float u_reach;         // cutoff * the kernel's largest standard deviation
 uniform float u_pixels_per_unit;
 
-flat out vec3 v_center;
-flat out vec4 v_sample;
-flat out float v_scale;
+out vec3 g_center;
+out vec4 g_sample;
+out float g_scale;
+out float g_size;              // the sprite's side in pixels
 #if SHADING
 in vec3 a_gradient;            // the field's gradient at the sample
-flat out vec3 v_gradient;
+out vec3 g_gradient;
 #endif
 
 void main() {
     gl_Position = u_view_proj * vec4(a_position, 1.0);
-    gl_PointSize = spriteSize(a_position, u_reach * a_scale, u_eye, u_forward, u_pixels_per_unit);
-    v_center = a_position;
-    v_sample = a_sample;
-    v_scale = a_scale;
+    g_size = spriteSize(a_position, u_reach * a_scale, u_eye, u_forward, u_pixels_per_unit);
+    g_center = a_position;
+    g_sample = a_sample;
+    g_scale = a_scale;
 #if SHADING
-    v_gradient = a_gradient;
+    g_gradient = a_gradient;
 #endif
 }
