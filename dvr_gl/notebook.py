@@ -55,7 +55,7 @@ class RenderedImage(np.ndarray):
     def __array_wrap__(self, array, context=None, return_scalar=False):
         # ufunc results that are no longer an image (a mean, a channel) are plain arrays
         if array.ndim == 3 and array.shape[2] == 4:
-            return super().__array_wrap__(array, context, return_scalar)
+            return RenderedImage(array, self.background)     # NumPy 1 and 2 alike
         plain = np.asarray(array).view(np.ndarray)
         return plain[()] if return_scalar or plain.ndim == 0 else plain
 

@@ -31,6 +31,7 @@ options, so another tolerance or a repeated frame costs no pilot.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
@@ -210,7 +211,7 @@ def verified(model, render, scene, tolerance, preintegrate=False):
             choice = Choice(tolerance=tolerance, step=k * scene.volume.min_spacing, step_voxels=k,
                             predicted_rmse=model.predict(k), order=model.order, pilot_size=model.pilot_size,
                             pilot_seconds=model.pilot_seconds, preintegrate=preintegrate)
-    choice = Choice(**{**choice.__dict__, "pilot_seconds": model.pilot_seconds})
+    choice = dataclasses.replace(choice, pilot_seconds=model.pilot_seconds)
     model.choices[key] = choice
     return model, choice
 

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .common import blend_under, box_rays, plane_inside, segment_of, slab_segment
+from .common import blend_under, box_rays, classifier, plane_inside, segment_of, slab_segment
 from .particles import lit_colors
 from .sprites import sprite_pixel_pairs
 
@@ -76,14 +76,7 @@ def _render_tent(plan, lut_exact):
     if plan.gradients is not None:
         from .shading import SampleTerms
         terms = SampleTerms(scene, None)
-    if lut_exact:
-        tf = scene.tf
-
-        def classify(s):
-            return np.concatenate([tf.color(s), tf.opacity(s)[..., None]], axis=-1), 1 - tf.opacity(s)
-    else:
-        def classify(s):
-            return plan.lut.lookup(s), plan.lut.lookup_transparency(s)
+    classify, transparency = classifier(plan, lut_exact)
     acc = np.zeros((len(o), 4))
     values = scene.volume.values(np.float64)[plan.samples.mask]
 
@@ -104,7 +97,7 @@ def _render_tent(plan, lut_exact):
         rows, tk, points = rows[seen], tk[seen], points[seen]
         s = value[seen] / weight[seen]
         a, b = slab_segment(k, sheets.count, tk, t_of(k + 1)[rows], t_of(k - 1)[rows], t0[rows], t1[rows])
-        rgba, clear = classify(s)
+        rgba, clear = classify(s), transparency(s)
         length = (b - a) / scene.tf.unit_distance
         if terms is not None:
             g = grad[seen] / weight[seen][:, None]

@@ -296,8 +296,11 @@ def _tent_plan(scene, density, sheet_spacing, skip_empty, target, tables):
     axis = run_axis(samples, volume, scene.camera.forward)
     runs = None if samples.count == 0 else tables.get("tent_runs", samples, axis,
                                                       make=lambda s, a: runs_along(s, a))
+    # the sheets are 3D slicing's planes, so its gap pass fills the rays that cross none
+    from . import slice3d
+    gap = slice3d.make_plan(scene, float(sheet_spacing), target=target, tables=tables)
     sheets = tables.get("tent_sheets", samples, scene.camera, float(sheet_spacing),
-                        make=lambda s, camera, spacing: sheet_order(scene, runs, spacing))
+                        make=lambda s, camera, spacing: sheet_order(scene, runs, spacing, gap.far_depth, gap.count))
     splat_defines = {"ORTHO": 1} if scene.camera.is_ortho else {}
     if scene.shading:
         splat_defines["SHADING"] = 1
@@ -307,8 +310,6 @@ def _tent_plan(scene, density, sheet_spacing, skip_empty, target, tables):
     gradients = None
     if scene.shading:      # once per set of samples
         gradients = tables.get("tent_gradients", samples, volume, make=tent_gradients)
-    from . import slice3d
-    gap = slice3d.make_plan(scene, float(sheet_spacing), target=target, tables=tables)
     return TentPlan(scene=scene, samples=samples, sheets=sheets, lut=lut, density=density, skip_empty=skip_empty,
                     target=target, defines=defines, splat_defines=splat_defines, gradients=gradients, gap=gap)
 
@@ -421,15 +422,14 @@ def kernel_reach(volume, forward):
     return float(np.abs(np.asarray(forward, np.float64)) @ volume.spacing)
 
 
-def sheet_order(scene, runs, spacing):
-    """The sheets of this view ``spacing`` apart and, for each, the runs whose tents may
-    reach it (those whose support's depth range holds the sheet's depth, give or take a
-    sheet), listed sheet by sheet."""
+def sheet_order(scene, runs, spacing, far_depth, count):
+    """The sheets of this view (``count`` planes ``spacing`` apart, the farthest at depth
+    ``far_depth``: 3D slicing's) and, for each, the runs whose tents may reach it (those
+    whose support's depth range holds the sheet's depth, give or take a sheet), listed
+    sheet by sheet."""
     cam = scene.camera
     volume = scene.volume
     eye = cam.eye - volume.bounds[0]
-    corners = proxy_geometry.box_corners(np.zeros(3), volume.extent)
-    far_depth, count = proxy_geometry.slice_depths(corners, cam.forward, eye, spacing)
     if count == 0 or runs is None or runs.count == 0:
         return SheetOrder(far_depth, count, spacing, runs, np.zeros(0, np.int32), np.zeros((count, 2), np.int64))
     reach = kernel_reach(volume, cam.forward)
