@@ -39,6 +39,75 @@ def refine_iso_bisection(sample, ta, tb, iso, steps=ISO_BISECTION_STEPS):
     return 0.5 * (ta + tb)
 
 
+def _refined_segments(plan, s_front, s_back, a, length, midpoints, sample):
+    """Pre-integrated segments with refinement (GLSL: raycast.frag, REFINE): those whose
+    reachable values touch the TF's detail are cut at ``plan.refine - 1`` even points and
+    at every cell face they cross, each part sampled and read from the fine table,
+    composited front to back. ``sample(t, rows)`` samples the rows' rays at ``t``."""
+    from ..techniques.raycast import REACH_BLOCK, block_of, touches_detail
+    volume = plan.scene.volume
+    bound = plan.reach[block_of(volume, midpoints, plan.reach.shape, REACH_BLOCK)].astype(np.float64)
+    mid = 0.5 * (s_front + s_back)
+    reach = 0.5 * np.maximum(bound * length, np.abs(s_back - s_front))
+    split = touches_detail(plan.detail, mid - reach, mid + reach)
+    out = plan.preint.segment(s_front, s_back, length)
+    rows = np.flatnonzero(split)
+    if rows.size == 0:
+        return out
+    a_r, len_r = a[rows], length[rows]
+    b_r = a_r + len_r
+    cuts = [a_r[:, None] + len_r[:, None] * np.arange(1, plan.refine)[None, :] / plan.refine]
+    origins, dirs = sample.rays(rows)
+    spacing = np.asarray(volume.spacing, np.float64)
+    for axis in range(3):
+        o_, d_ = origins[:, axis], dirs[:, axis]
+        n_faces = int(np.ceil(plan.step / spacing[axis])) + 1
+        with np.errstate(divide="ignore", invalid="ignore"):
+            index_a = (o_ + a_r * d_) / spacing[axis]
+            first = np.where(d_ < 0, np.ceil(index_a) - 1, np.floor(index_a) + 1)
+            faces = first[:, None] + np.sign(d_)[:, None] * np.arange(n_faces)[None, :]
+            t = (faces * spacing[axis] - o_[:, None]) / d_[:, None]
+        cuts.append(np.where(d_[:, None] != 0, t, np.inf))
+    cuts = np.concatenate(cuts, axis=1)
+    cuts = np.where((cuts > a_r[:, None]) & (cuts < b_r[:, None]), cuts, np.inf)
+    cuts = np.sort(cuts, axis=1)
+    t_prev = a_r.copy()
+    s_prev = s_front[rows].copy()
+    acc = np.zeros((rows.size, 4))
+    for c in range(cuts.shape[1] + 1):
+        t_next = cuts[:, c] if c < cuts.shape[1] else b_r
+        inner = np.isfinite(t_next)
+        if not inner.any():
+            t_next = b_r
+        t_next = np.where(inner, t_next, b_r)
+        s_next = s_back[rows].copy()
+        live = np.flatnonzero(t_next < b_r)
+        if live.size:
+            s_next[live] = sample(t_next[live], rows[live])
+        piece = plan.preint_fine.segment(s_prev, s_next, t_next - t_prev)
+        acc[:, :3] += (1 - acc[:, 3:4]) * piece[:, :3]
+        acc[:, 3] += (1 - acc[:, 3]) * piece[:, 3]
+        t_prev, s_prev = t_next, s_next
+        if not inner.any():
+            break
+    out[rows] = acc
+    return out
+
+
+class _RowSampler:
+    """``sample(t, sub)``: the field at ``t`` on the rays ``rows[sub]``; ``rays(sub)``:
+    their box-relative origins and directions."""
+
+    def __init__(self, sample, origins, dirs, rows):
+        self.sample, self.origins, self.dirs, self.rows = sample, origins, dirs, rows
+
+    def __call__(self, t, sub):
+        return self.sample(t, self.rows[sub])
+
+    def rays(self, sub):
+        return self.origins[self.rows[sub]], self.dirs[self.rows[sub]]
+
+
 def render_plan(plan, lut_exact=False):
     """The reference image of a ray-casting plan, (H, W, 4) float64.
 
@@ -112,7 +181,11 @@ def render_plan(plan, lut_exact=False):
             start = rows[~have_front[rows]]
             s_front[start] = sample(a[~have_front[rows]], start)
             s_back = sample(b, rows)
-            segment = plan.preint.segment(s_front[rows], s_back, length)
+            if plan.refine > 1:
+                segment = _refined_segments(plan, s_front[rows], s_back, a, length, o[rows] + tm[:, None] * d[rows],
+                                            _RowSampler(sample, o, d, rows))
+            else:
+                segment = plan.preint.segment(s_front[rows], s_back, length)
             if terms is not None:
                 segment = RayLighting(terms, o[rows], d[rows]).segments(segment, tm)
             s_front[rows] = s_back

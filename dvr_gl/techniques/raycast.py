@@ -35,13 +35,28 @@ skip_empty : empty-space skipping (composite mode only). The volume is cut into 
     the texture unit cannot leave it) is classified once per transfer function. A sample
     that comes out fully transparent looks up its brick; if the brick's whole range has
     zero opacity, every midpoint in it contributes exactly nothing and the ray jumps to
-    the brick's exit. The image is identical with it on and off. Not used with
-    pre-integration (a segment between two transparent samples may cross an opaque
-    spike, and the table's segments must stay contiguous).
+    the brick's exit. The image is identical with it on and off. With pre-integration a
+    brick is empty when no value within one table cell of its range has opacity (the
+    table's bilinear nodes around any value in it are then all zero); a transparent
+    segment in such a brick lets the ray jump over every later segment with both ends
+    in it, each exactly zero, and the one after starts with a fresh front sample.
 preintegrate : composite mode: classify each segment as a whole from the field at its two
     ends with the pre-integrated table (``dvr_gl.preintegration``; its segment length is
     the step, and the shorter first and last segments are corrected as that module
     says) instead of one midpoint sample.
+refine : 1 (default) or an integer from 2 to 64, with ``preintegrate=True``: adaptive
+    sampling where the transfer function has detail. Pre-integration takes the field as
+    linear between a segment's ends; the trilinear field is not, and a narrow opacity
+    feature (a spike a few per cent of the range wide) is then misplaced by a fraction of
+    a step, which converges only at first order. Along a segment of length L the field
+    stays within ``G L / 2`` of the mean of its ends (G: a bound on the gradient's
+    magnitude over the segment's brick and its neighbours, from the largest sample
+    differences of each cell, made once per volume), so when that reachable interval
+    holds no knot at which the TF's opacity bends (with opacity on one side), the TF is
+    one line over everything the segment can see. Otherwise the segment is split into
+    ``refine`` parts, each sampled and read from a second table made for their length:
+    the extra samples go only where a narrow feature may be crossed (tested: the same
+    image as a uniform step ``step / refine`` wherever refinement happens).
 step_table : True (default): a full-length segment (all but a ray's first and last) reads
     its premultiplied, opacity-corrected segment from a table made once per TF and step
     (``LookupTable.step_table``) instead of correcting each sample's opacity (a log and an
@@ -75,6 +90,8 @@ from .common import (cleared_target, add_optional_inputs, bind, box_proxy, camer
                      check_step, check_target, preintegration_applies, preintegration_table, tf_uniforms, volume_uniforms)
 
 BRICK = 8            # brick edge in cells, for empty-space skipping
+MAX_REFINE = 64
+REACH_BLOCK = 2      # block edge in cells of the gradient bounds that refinement reads
 JITTER_TABLE = 64    # jitter table edge in pixels
 
 MODES = ("composite", "mip", "minip", "average", "isosurface")
@@ -92,6 +109,11 @@ class RaycastPlan:
     ert_transmittance: float = 0.0
     occupancy: np.ndarray | None = None    # (bz, by, bx) bool, or None when not skipping
     preint: object = None                  # a preintegration.PreintegrationTable, or None
+    refine: int = 1                        # parts per refined pre-integrated segment
+    preint_fine: object = None             # the table for step / refine, or None
+    bricks: np.ndarray | None = None       # pre-integration with skipping: (bz, by, bx) float32 occupied
+    reach: np.ndarray | None = None        # refine: gradient bounds per REACH_BLOCK cells, float32
+    detail: np.ndarray | None = None       # refine: (n, 2) value intervals of the TF's detail
     defines: dict = field(default_factory=dict)
     step_rows: np.ndarray | None = None    # LookupTable.step_table for this step, or None
 
@@ -107,7 +129,8 @@ def default_step(volume):
 
 
 def make_plan(scene, step=None, *, target="rgba32f", jitter_seed=None, ert_transmittance=1e-3,
-              skip_empty=True, preintegrate=False, gradients="on_the_fly", step_table=True, tables=None):
+              skip_empty=True, preintegrate=False, refine=1, gradients="on_the_fly", step_table=True,
+              tables=None):
     """Validate the options and decide what the scene needs. ``tables`` (a
     ``dvr_gl.cache.TableCache``) keeps the TF's lookup table and the volume's brick
     ranges between frames."""
@@ -125,15 +148,34 @@ def make_plan(scene, step=None, *, target="rgba32f", jitter_seed=None, ert_trans
     if check_flag("preintegrate", preintegrate) and scene.mode != "composite":
         raise ValueError(f"preintegrate applies to mode 'composite' only, got mode {scene.mode!r}")
 
+    if isinstance(refine, bool) or not isinstance(refine, (int, np.integer)):
+        raise TypeError(f"refine must be an integer (parts per refined segment), got {refine!r}")
+    if not 1 <= refine <= MAX_REFINE:
+        raise ValueError(f"refine must be from 1 to {MAX_REFINE}, got {refine!r}")
+    if refine > 1 and not preintegrate:
+        raise ValueError(f"refine splits pre-integrated segments; give preintegrate=True (got refine={refine})")
+    if refine > 1 and step > 2 * REACH_BLOCK * scene.volume.min_spacing:
+        raise ValueError(f"refine bounds the field over blocks of {REACH_BLOCK} cells and their neighbours: "
+                         f"step must be at most {2 * REACH_BLOCK} voxels "
+                         f"({2 * REACH_BLOCK * scene.volume.min_spacing:g}), got {step!r}")
     composite = scene.mode == "composite"
     sabella = scene.optical_model == "sabella"   # the peak is over every sample: no skipping, no early end
     lut = tables.get("lut", scene.tf, make=LookupTable)
     jitter = None
     if jitter_seed is not None:
         jitter = jitter_table(int(jitter_seed))
-    preint = None
+    preint = fine = bricks = detail = reach = None
     if preintegrate:
         preint = preintegration_table(scene, step, tables)
+        if refine > 1:
+            fine = preintegration_table(scene, step / refine, tables)
+            detail = tables.get("tf_detail", scene.tf, make=detail_intervals)
+        if refine > 1:
+            reach = tables.get("gradient_bounds", scene.volume, make=gradient_bounds)
+        if skip_empty:
+            ranges = tables.get("brick_ranges", scene.volume, make=brick_value_ranges)
+            bricks = tables.get("preint_occupancy", scene.volume, scene.tf, preint,
+                                make=lambda volume, tf, table: preint_occupancy(ranges, tf, table))
     occupancy = None
     if skip_empty and composite and preint is None and not sabella:
         # once per volume and once per (volume, TF) respectively, never per frame
@@ -154,6 +196,10 @@ def make_plan(scene, step=None, *, target="rgba32f", jitter_seed=None, ert_trans
         defines["MASK_NONFINITE"] = 1
     if preint is not None:
         defines["PREINTEGRATE"] = 1
+        if skip_empty:
+            defines["SKIP_EMPTY"] = 1
+        if refine > 1:
+            defines["REFINE"] = 1
     defines.update(shading_defines(scene, gradients))
     step_rows = None
     if check_flag("step_table", step_table) and uses_step_table(scene, preint):
@@ -162,7 +208,8 @@ def make_plan(scene, step=None, *, target="rgba32f", jitter_seed=None, ert_trans
         defines["STEP_TABLE"] = 1
     return RaycastPlan(scene=scene, step=step, lut=lut, target=target, jitter=jitter,
                        ert_transmittance=ert, occupancy=occupancy, preint=preint, defines=defines,
-                       step_rows=step_rows)
+                       step_rows=step_rows, refine=int(refine), preint_fine=fine, bricks=bricks, detail=detail,
+                       reach=reach)
 
 
 def uses_step_table(scene, preint):
@@ -206,6 +253,105 @@ def brick_value_ranges(volume):
         lo = _block_reduce(lo, axis, np.min)
         hi = _block_reduce(hi, axis, np.max)
     return lo.astype(np.float64), hi.astype(np.float64)
+
+
+def gradient_bounds(volume):
+    """Per block of REACH_BLOCK cells (bz, by, bx), float32: a bound on the magnitude of
+    the trilinear field's gradient over the block and its 26 neighbours. In a cell each
+    partial derivative is a convex combination of the differences along that axis's four
+    edges, so the cell's ``sqrt(sum over axes of (largest edge difference / spacing)^2)``
+    bounds it (rounded up to float32). Once per volume (non-finite samples count as 0;
+    masked cells add nothing anyway)."""
+    from scipy.ndimage import maximum_filter
+    v = np.nan_to_num(volume.values(np.float64), nan=0.0, posinf=0.0, neginf=0.0)
+    sx, sy, sz = volume.spacing
+    squares = np.zeros(tuple(max(n - 1, 1) for n in v.shape))
+    for axis, h in ((2, sx), (1, sy), (0, sz)):
+        if v.shape[axis] < 2:
+            continue
+        edge = np.abs(np.diff(v, axis=axis)) / h
+        for a in (a for a in range(3) if a != axis):    # the largest of the cell's four edges
+            if edge.shape[a] > 1:
+                edge = np.maximum(np.take(edge, np.arange(edge.shape[a] - 1), axis=a),
+                                  np.take(edge, np.arange(1, edge.shape[a]), axis=a))
+        squares += edge ** 2
+    cells = np.sqrt(squares)
+    nb = [max(1, math.ceil((n - 1) / REACH_BLOCK)) for n in v.shape]
+    padded = np.zeros([b * REACH_BLOCK for b in nb])
+    padded[:cells.shape[0], :cells.shape[1], :cells.shape[2]] = cells
+    per_block = padded.reshape(nb[0], REACH_BLOCK, nb[1], REACH_BLOCK, nb[2], REACH_BLOCK).max(axis=(1, 3, 5))
+    bound = maximum_filter(per_block, size=3, mode="nearest") * (1 + 2.0 ** -20)
+    return bound.astype(np.float32)
+
+
+def preint_occupancy(ranges, tf, table):
+    """(bz, by, bx) float32 for pre-integration's skipping: 1 where some value within one
+    table cell (and float rounding) of the brick's range has non-zero opacity in the
+    exact TF (the table's bilinear nodes around any value of an empty brick are then all
+    zero, and so is every segment with both ends in it)."""
+    lo, hi = ranges
+    rel = 64 * 2.0 ** -24
+    cell = 1.0 / table.scale
+    a = lo - rel * np.abs(lo) - 1.01 * cell
+    b = hi + rel * np.abs(hi) + 1.01 * cell
+    knots = tf.knots
+    nonzero = np.concatenate([[0], np.cumsum(tf.opacity(knots) > 0)])
+    inside = nonzero[np.searchsorted(knots, b, side="right")] - nonzero[np.searchsorted(knots, a, side="left")]
+    return ((inside > 0) | (tf.opacity(a) > 0) | (tf.opacity(b) > 0)).astype(np.float32)
+
+
+def detail_knots(tf):
+    """The knots at which refinement looks: every knot of the TF with non-zero opacity
+    at it or on either neighbouring interval (where the opacity or the colour it weighs
+    may bend)."""
+    knots = tf.knots
+    alpha = tf.opacity(knots) > 0
+    near = alpha.copy()
+    near[1:] |= alpha[:-1]
+    near[:-1] |= alpha[1:]
+    return knots[near]
+
+
+MAX_DETAIL = 8         # detail intervals the shader tests (uniforms)
+
+
+def detail_intervals(tf):
+    """(n, 2) float64, n <= MAX_DETAIL: value intervals that hold every detail knot,
+    widened by float32 rounding (GLSL ``touchesDetail`` tests overlap with each). More
+    than MAX_DETAIL knots are grouped by closing the smallest gaps first (which can only
+    refine more segments, never fewer)."""
+    knots = detail_knots(tf)
+    if knots.size == 0:
+        return np.zeros((0, 2))
+    groups = [[k, k] for k in knots]
+    while len(groups) > MAX_DETAIL:
+        gaps = [groups[i + 1][0] - groups[i][1] for i in range(len(groups) - 1)]
+        i = int(np.argmin(gaps))
+        groups[i:i + 2] = [[groups[i][0], groups[i + 1][1]]]
+    out = np.array(groups, np.float64)
+    pad = 4 * 2.0 ** -24 * np.maximum(np.abs(out), np.abs(knots).max())
+    return out + np.stack([-pad[:, 0], pad[:, 1]], axis=1)
+
+
+def refine_cuts(plan):
+    """A bound on a refined segment's cuts: its even parts and the cell faces it can
+    cross (the shader's loop bound)."""
+    faces = np.ceil(plan.step / np.asarray(plan.scene.volume.spacing, np.float64)) + 1
+    return int(plan.refine + faces.sum() + 1)
+
+
+def touches_detail(intervals, lo, hi):
+    """NumPy twin of GLSL ``touchesDetail``."""
+    lo, hi = np.asarray(lo)[..., None], np.asarray(hi)[..., None]
+    return ((hi >= intervals[:, 0]) & (lo <= intervals[:, 1])).any(axis=-1)
+
+
+def block_of(volume, points, shape, block):
+    """Indices (z, y, x order, for indexing) of the blocks of ``block`` cells holding
+    box-relative points, clamped to ``shape``."""
+    idx = np.floor(points / volume.spacing / block).astype(np.int64)
+    idx = np.clip(idx, 0, np.array(shape[:3][::-1]) - 1)
+    return idx[:, 2], idx[:, 1], idx[:, 0]
 
 
 def brick_occupancy(ranges, lut):
@@ -267,10 +413,25 @@ def draw(renderer, plan):
         textures["t_step_tf"] = renderer.resource("step_tf", plan.step_rows, make=lambda: _table_texture(
             renderer.ctx, plan.step_rows))
     uniforms = {**camera_uniforms(scene), **volume_uniforms(volume), **tf_uniforms(plan.lut, scene.tf),
-                "u_step": plan.step, "u_max_segments": plan.max_segments}
-    if plan.occupancy is not None:
+                "u_step": plan.step, "u_max_segments": plan.max_segments,
+                "u_max_iterations": plan.max_segments * (plan.refine + 2)}
+    if plan.occupancy is not None or plan.bricks is not None:
         uniforms["u_brick"] = float(BRICK)
     add_optional_inputs(renderer, plan, textures, uniforms)
+    if plan.bricks is not None:
+        textures["t_bricks"] = renderer.resource("preint_occupancy", plan.bricks, make=lambda: renderer._texture3d(
+            "preint_occupancy", plan.bricks, 1, "f4", linear=False))
+    if plan.reach is not None:
+        textures["t_reach"] = renderer.resource("gradient_bounds", plan.reach, make=lambda: renderer._texture3d(
+            "gradient_bounds", plan.reach, 1, "f4", linear=False))
+        uniforms["u_reach_block"] = float(REACH_BLOCK)
+    if plan.refine > 1:
+        textures["t_preint"] = renderer.resource("preint_stacked", plan.preint, plan.preint_fine, make=lambda: (
+            _stacked_tables(ctx, plan.preint, plan.preint_fine)))
+        detail = np.zeros((MAX_DETAIL, 2), np.float32)
+        detail[:len(plan.detail)] = plan.detail
+        uniforms.update({"u_detail_count": len(plan.detail), "u_refine": plan.refine,
+                         "u_refine_cuts": refine_cuts(plan)})
     if plan.ert_transmittance > 0:
         uniforms["u_ert_transmittance"] = plan.ert_transmittance
     if scene.mode == "isosurface":
@@ -279,6 +440,8 @@ def draw(renderer, plan):
         from ..reference.shading import depth_range
         uniforms["u_depth_range"] = depth_range(scene)
     bind(prog, textures, uniforms)
+    if plan.refine > 1 and "u_detail" in prog:
+        prog["u_detail"].write(detail.tobytes())
 
     kind, view_proj = box_proxy(scene, grow_pixels=grow_pixels(renderer.ctx))
     prog["u_view_proj"].write(view_proj.astype("f4").tobytes())
@@ -293,6 +456,15 @@ def draw(renderer, plan):
     vao.render()
     ctx.disable(ctx.CULL_FACE)
     return fbo
+
+
+def _stacked_tables(ctx, coarse, fine):
+    """The nominal-length table in rows 0 .. size - 1 and the refined parts' table
+    below it (``preintegratedSegmentIn``)."""
+    data = np.concatenate([np.asarray(coarse.table, np.float32), np.asarray(fine.table, np.float32)])
+    tex = ctx.texture((coarse.size, 2 * coarse.size), 4, np.ascontiguousarray(data).tobytes(), dtype="f4")
+    tex.filter = (ctx.NEAREST, ctx.NEAREST)
+    return tex
 
 
 def _table_texture(ctx, rows):

@@ -39,6 +39,9 @@
 #ifndef STEP_TABLE
 #define STEP_TABLE 0      // composite, emission-absorption, no pre-integration: see below
 #endif
+#ifndef REFINE
+#define REFINE 0          // pre-integration: split segments that may meet TF detail
+#endif
 
 #include "common/camera_ray.glsl"
 #include "common/ray_box.glsl"
@@ -70,9 +73,32 @@ uniform int u_max_segments;   // upper bound on segments per ray (a safety net)
 #if JITTER
 uniform sampler2D t_jitter;   // offsets in [0, 1) of a step, tiled over the image
 #endif
-#if SKIP_EMPTY
+#if SKIP_EMPTY && !PREINTEGRATE
 uniform sampler3D t_occupancy; // per brick: 1 if any value in it has non-zero opacity
 uniform float u_brick;         // brick size in samples
+#endif
+#if PREINTEGRATE && SKIP_EMPTY
+uniform sampler3D t_bricks;    // R32F per brick: 1 if some value within a table cell of
+                               // its range has non-zero opacity
+uniform float u_brick;         // brick size in samples
+#endif
+#if REFINE
+uniform sampler3D t_reach;     // R32F per block of u_reach_block cells: a bound on the
+                               // field's gradient over it and its 26 neighbours
+uniform float u_reach_block;
+#define MAX_DETAIL 8
+uniform vec2 u_detail[MAX_DETAIL];  // value intervals holding the TF's detail knots
+uniform int u_detail_count;
+uniform int u_refine;         // even parts per refined segment
+uniform int u_refine_cuts;    // a bound on a refined segment's cuts (its parts and faces)
+// Can a value in [lo, hi] lie on a knot where the TF's opacity bends?
+bool touchesDetail(float lo, float hi) {
+    bool touches = false;
+    for (int k = 0; k < MAX_DETAIL; ++k) {
+        touches = touches || (k < u_detail_count && hi >= u_detail[k].x && lo <= u_detail[k].y);
+    }
+    return touches;
+}
 #endif
 #if EARLY_RAY_TERMINATION
 uniform float u_ert_transmittance;
@@ -83,7 +109,21 @@ uniform float u_iso;
 
 out vec4 f_color;
 
-#if SKIP_EMPTY
+#if SKIP_EMPTY && PREINTEGRATE
+// A pre-integrated segment k (midpoint p) came out fully transparent: if its brick is
+// empty, every later segment with both ends in the brick is exactly zero (its ends'
+// values, and the table nodes around them, have zero opacity); return the last of them
+// (k if none): the one after it starts afresh with its own front sample.
+int lastSegmentInEmptyBrick(vec3 p, vec3 origin, vec3 dir, float t0, float jitter, int k) {
+    ivec3 brick = clamp(ivec3(floor(p / u_spacing / u_brick)), ivec3(0), textureSize(t_bricks, 0) - 1);
+    if (texelFetch(t_bricks, brick, 0).r >= 0.5) return k;
+    vec3 lo = vec3(brick) * u_brick * u_spacing;
+    vec3 hi = lo + u_brick * u_spacing;
+    vec3 t_far = max((lo - origin) / dir, (hi - origin) / dir);
+    float t_exit = min(min(t_far.x, t_far.y), t_far.z);
+    return max(k, int(floor((t_exit - t0) / u_step - jitter)) - 1);
+}
+#elif SKIP_EMPTY
 // A sample at p (segment k) came out fully transparent: if its brick is empty, every
 // midpoint inside it has zero opacity, so return the segment before the one whose
 // midpoint first passes the brick's exit (rounding can only make the ray look once more,
@@ -178,7 +218,7 @@ void main() {
         float s = sampleVolume(p);
         vec4 piece = lookupStepTF(s);
         if (piece.a <= 0.0) {
-  #if SKIP_EMPTY
+  #if SKIP_EMPTY && !PREINTEGRATE
             k = skipEmptyBrick(p, origin, dir, t0, jitter, k);
   #endif
             continue;
@@ -218,10 +258,61 @@ void main() {
         // the whole segment from the field at its two ends (the end is the next start)
         if (!have_front) s_front = sampleVolume(origin + a * dir);
         float s_back = sampleVolume(origin + b * dir);
+  #if REFINE
+        // The field may leave the straight line between the ends by the gradient bound
+        // times the distance: if the values it can reach touch a bend of the TF's opacity
+        // (a narrow feature), the segment is split into u_refine parts, each sampled and
+        // read from the table of their length; a loop, so that groups of pixels none of
+        // which refines skip it.
+        float mid = 0.5 * (s_front + s_back);
+        ivec3 block = clamp(ivec3(floor(p / u_spacing / u_reach_block)), ivec3(0), textureSize(t_reach, 0) - 1);
+        float reach = 0.5 * max(texelFetch(t_reach, block, 0).r * len, abs(s_back - s_front));
+        bool refined = touchesDetail(mid - reach, mid + reach);
+        vec4 segment = vec4(0.0);
+        if (refined) {
+            // The segment is cut at its u_refine - 1 even points and wherever it crosses a
+            // cell face (where the trilinear field's slope jumps: between two cuts it is
+            // one smooth cubic, so the straight line errs at second order); a walk from
+            // cut to cut, fetching each, reading the table of the parts' length.
+            float part = len / float(u_refine);
+            vec3 index_a = (origin + a * dir) / u_spacing;
+            vec3 face = mix(floor(index_a) + 1.0, ceil(index_a) - 1.0, lessThan(dir, vec3(0.0)));
+            vec3 t_face = mix((face * u_spacing - origin) / dir, vec3(3.0e38), equal(dir, vec3(0.0)));
+            vec3 t_cell = mix(u_spacing / abs(dir), vec3(0.0), equal(dir, vec3(0.0)));
+            float t_prev = a;
+            float s_prev = s_front;
+            int even = 1;
+            for (int n = 0; n < u_refine_cuts && t_prev < b; ++n) {
+                float t_even = even < u_refine ? a + float(even) * part : b;
+                float t_next = min(min(t_even, min(t_face.x, min(t_face.y, t_face.z))), b);
+                float s_next = t_next < b ? sampleVolume(origin + t_next * dir) : s_back;
+                vec4 piece = preintegratedSegmentIn(u_pi_size, s_prev, s_next, t_next - t_prev);
+                segment.rgb += (1.0 - segment.a) * piece.rgb;
+                segment.a += (1.0 - segment.a) * piece.a;
+                if (t_even <= t_next) even += 1;
+                t_face += mix(vec3(0.0), t_cell, lessThanEqual(t_face, vec3(t_next)));
+                t_prev = t_next;
+                s_prev = s_next;
+            }
+        } else {
+            segment = preintegratedSegment(s_front, s_back, len);
+        }
+  #else
         vec4 segment = preintegratedSegment(s_front, s_back, len);
+  #endif
         segment = litSegment(segment, p, dir);
         s_front = s_back;
         have_front = true;
+  #if SKIP_EMPTY
+        if (segment.a <= 0.0) {
+            int k_last = lastSegmentInEmptyBrick(p, origin, dir, t0, jitter, k);
+            if (k_last > k) {
+                k = k_last;
+                have_front = false;
+            }
+            continue;
+        }
+  #endif
         color += (1.0 - alpha_acc) * segment.rgb;
         alpha_acc += (1.0 - alpha_acc) * segment.a;
   #if EARLY_RAY_TERMINATION
@@ -242,7 +333,7 @@ void main() {
         if (rgba.a <= 0.0) {
             // Nothing to composite. Only now look at the brick: occupied regions never
             // pay for the lookup, and an empty brick is crossed in one jump.
-  #if SKIP_EMPTY
+  #if SKIP_EMPTY && !PREINTEGRATE
             k = skipEmptyBrick(p, origin, dir, t0, jitter, k);
   #endif
             continue;
