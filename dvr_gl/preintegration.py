@@ -14,27 +14,39 @@ The table holds, at every pair of nodes ``s_i = lo + i (hi - lo) / (size - 1)``,
 extinction ``D`` and the colour per unit opacity ``K = C / A`` of a segment of the nominal
 length ``L0`` given to :func:`build_table`. A fragment interpolates (K, D) bilinearly.
 
-The length approximation
-------------------------
+The length correction
+---------------------
 ``D`` does not depend on the length, so ``A(L) = 1 - exp(-L D)`` is exact for every length.
 The colour does: a longer segment hides more of its far part behind its near part. The
-table keeps ``K(L0)`` and a fragment of length ``L`` uses ``C(L) ~ K(L0) * A(L)``. The error
-is zero at ``L = L0`` and wherever the colour is constant over the segment, and grows with
-``|L / L0 - 1|`` and with the optical depth. Measured by :func:`length_correction_error`
-(largest absolute colour error, premultiplied, any channel, over all pairs of nodes of the
-default 512-node table on the range [0, 1]):
+table keeps ``K(L0)`` and, made once per TF for every length, ``K0``: the colour per unit
+opacity as the length goes to 0 (the extinction-weighted mean colour). A segment of length
+``L`` takes ``K = K0 + (K(L0) - K0) w`` with ``w = g(L D) / g(L0 D)``, ``g(x) = 1/x - 1/(e^x -
+1) - 1/2`` (:func:`length_weight`): exact when the extinction is constant over the segment
+and the colour linear along it, for any length. Measured by :func:`length_correction_error`
+(largest absolute colour error, premultiplied, any channel, over all pairs of nodes of a
+256-node table on [0, 1]; before the correction, ``K(L0)`` at every length, in brackets):
 
-    L / L0                                 0.1      0.5      0.9      1.1      1.5      2
-    smooth ramp,  L0 = unit distance     3.2e-3   7.4e-3   2.2e-3   2.5e-3   1.5e-2   3.3e-2
-    narrow spike, L0 = unit distance     6.2e-3   1.3e-2   3.6e-3   3.9e-3   2.1e-2   4.6e-2
-    smooth ramp,  L0 = unit / 4          2.1e-4   5.5e-4   1.9e-4   2.2e-4   1.5e-3   3.7e-3
-    narrow spike, L0 = unit / 4          3.9e-4   1.0e-3   3.4e-4   4.0e-4   2.6e-3   6.3e-3
+    L / L0                               0.1             0.5             0.9             1.5             2
+    smooth ramp,  L0 = unit distance   5.9e-6 (3.2e-3) 7.0e-5 (7.4e-3) 3.9e-5 (2.2e-3) 4.4e-4 (1.5e-2) 1.3e-3 (3.3e-2)
+    narrow spike, L0 = unit distance   7.5e-5 (8.4e-3) 7.5e-4 (1.8e-2) 3.6e-4 (5.0e-3) 3.4e-3 (3.0e-2) 9.1e-3 (6.3e-2)
+    smooth ramp,  L0 = unit / 4        9.5e-8 (2.1e-4) 1.3e-6 (5.5e-4) 7.8e-7 (1.9e-4) 1.0e-5 (1.5e-3) 3.5e-5 (3.7e-3)
+    narrow spike, L0 = unit / 4        1.3e-6 (5.5e-4) 1.6e-5 (1.4e-3) 9.6e-6 (4.8e-4) 1.2e-4 (3.6e-3) 3.8e-4 (8.8e-3)
 
 The ramp is grey 0 -> 1 with opacity 0 -> 0.8 over the range; the spike is 0.005 wide
 (1/200 of the range), opacity 0 -> 0.95 -> 0, red before its peak and blue after it.
-(Small ratios err less than 0.5 because A(L) itself is small there.) A renderer whose
-step stays within 10 % of ``L0`` is within ~4e-3 of the exact colour from this
-approximation; for steps far from ``L0`` build a table for the length actually used.
+Opaque entries (a segment reaching opacity 1) keep ``K(L0)``: their colour is exact at the
+nominal length only.
+
+The table's values
+------------------
+The nodes span the values with opacity (:func:`opacity_support`): where the TF is
+transparent below or above some knot, nodes there would only ever read zero. A segment
+reaching beyond the nodes is empty there; its part within goes from the edge to its
+other end (the field is linear along it) over its share of the length, which the length
+correction takes (``PreintegrationTable.segment``, GLSL ``preintegratedSegmentIn``). A
+spike 1 % of the data range wide thus gets all the nodes instead of 5 of 512. A TF that
+reaches opacity 1 keeps nodes over the whole data range (its opaque entries do not follow
+the correction).
 
 The convention for alpha = 1 (contract, section 3: tau = inf, the ray ends there): a
 segment whose closed value interval contains a value with alpha = 1, at a single point or
@@ -73,11 +85,13 @@ plateau and point, alpha within 1e-12 of 1, alpha = 0 regions, both directions, 
 segments, lengths of 0.5 and 20 unit distances; a 256-knot random function agrees to
 1e-13). The float32 table adds its rounding (relative 6e-8). Between the nodes the
 bilinear interpolation of (K, D) is the table's main error: on random segments of length
-L0 = u, about 1e-6 for the ramp above and 1e-2 for the spike (2.5 cells wide at 512
-nodes; 2e-3 with 1024 nodes), to be set against the length error above.
+L0 = u, about 1e-6 for the ramp above and 1e-2 for the spike when it is 2.5 cells wide
+(its share of 512 nodes spread over the whole range; 2e-3 with 1024 nodes): the reason the
+nodes now span only the values with opacity, where the spike has them all.
 
 Build time on two cores (NumPy, single thread): 0.15-0.3 s for 512 nodes, 0.05-0.1 s for
-256, 0.55-0.9 s for 1024, for transfer functions of 2 to 256 knots; it grows with
+256, 0.55-0.9 s for 1024, for transfer functions of 2 to 256 knots (once more, per TF, for
+the zero-length colour); it grows with
 ``L0 / unit_distance`` only where alpha is close to 1 (0.2-0.4 s at 512 with L0 = 50 u).
 """
 
@@ -254,7 +268,7 @@ class PreintegrationTable:
     for opaque segments; ``table64`` holds the same in float64 before rounding.
     Nodes: ``s_i = lo + i (hi - lo) / (size - 1)``; ``scale = (size - 1) / (hi - lo)``."""
 
-    def __init__(self, lo, hi, size, length, table64, tf=None):
+    def __init__(self, lo, hi, size, length, table64, tf=None, colour0_64=None):
         self.lo = float(lo)
         self.hi = float(hi)
         self.size = int(size)
@@ -267,7 +281,14 @@ class PreintegrationTable:
         table = table64.astype(np.float32)
         table.setflags(write=False)
         self.table = table
-        self._widened = None     # the float32 table as float64, for interpolation
+        # K as the length goes to 0 (the extinction-weighted mean colour), for the length
+        # correction; without it, K(L0) at every length
+        colour0_64 = table64[..., :3] if colour0_64 is None else np.asarray(colour0_64, np.float64)
+        colour0_64.setflags(write=False)
+        self.colour0_64 = colour0_64
+        self.colour0 = colour0_64.astype(np.float32)
+        self.colour0.setflags(write=False)
+        self._widened = None     # the float32 tables as float64, for interpolation
 
     @property
     def nodes(self):
@@ -281,43 +302,73 @@ class PreintegrationTable:
     def interpolate(self, s_front, s_back):
         """Bilinear (K, D) at the value pairs, float64 arithmetic on the float32 table:
         along the back index first, then the front one (the shader's order)."""
+        return self._interpolate(s_front, s_back)[..., :4]
+
+    def _interpolate(self, s_front, s_back):
+        """Bilinear (K, D, K0) at the value pairs, (..., 7)."""
         f0, wf = self._corner(s_front)
         b0, wb = self._corner(s_back)
         f0, wf, b0, wb = np.broadcast_arrays(f0, wf, b0, wb)
         if self._widened is None:
-            self._widened = self.table.astype(np.float64)
+            self._widened = np.concatenate([self.table, np.pad(self.colour0, ((0, 0), (0, 0), (0, 1)))],
+                                           axis=-1).astype(np.float64)
         t = self._widened
         wb_, wf_ = wb[..., None], wf[..., None]
         row0 = t[f0, b0] * (1.0 - wb_) + t[f0, b0 + 1] * wb_
         row1 = t[f0 + 1, b0] * (1.0 - wb_) + t[f0 + 1, b0 + 1] * wb_
         return row0 * (1.0 - wf_) + row1 * wf_
 
+    def inside_fraction(self, s_front, s_back):
+        """The fraction of a segment (the field linear along it) within the table's values
+        (GLSL: the same in node units; 1 where no end is beyond them)."""
+        last = self.size - 1
+        uf = (np.asarray(s_front, np.float64) - self.lo) * self.scale
+        ub = (np.asarray(s_back, np.float64) - self.lo) * self.scale
+        cf, cb = np.clip(uf, 0, last), np.clip(ub, 0, last)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            part = np.clip(np.abs(cb - cf) / np.abs(ub - uf), 0.0, 1.0)
+        return np.where((cf != uf) | (cb != ub), np.nan_to_num(part), 1.0)
+
     def segment(self, s_front, s_back, length):
         """Premultiplied (C, A) of segments, (..., 4) float64: the twin of GLSL
         ``preintegratedSegment``. ``A = -expm1(-length D)`` (1 where length D > 88, as in
-        the shader), ``C = K A``; values outside [lo, hi] are clamped to the table ends."""
+        the shader), ``C = K A``. The table holds every value with opacity (``build_table``):
+        a segment reaching beyond it is empty there, so it counts with the length of its
+        part within, the field being linear along it."""
         length = np.asarray(length, dtype=np.float64)
         bad = ~(np.isfinite(length) & (length >= 0))
         if bad.any():
             raise ValueError(f"length must be finite and >= 0, got {length[bad].ravel()[0]!r}")
-        v = self.interpolate(s_front, s_back)
+        length = length * self.inside_fraction(s_front, s_back)
+        both = self._interpolate(s_front, s_back)
+        v, k0 = both[..., :4], both[..., 4:7]
         v, length = np.broadcast_arrays(v, length[..., None])
+        k0 = np.broadcast_to(k0, v[..., :3].shape)
         od = length[..., 0] * v[..., 3]
         with np.errstate(over="ignore"):
             A = np.where(od > 88.0, 1.0, -np.expm1(-np.minimum(od, 88.0)))
+        w = length_weight(v[..., 3] * length[..., 0], v[..., 3] * self.length)
         out = np.empty(v.shape, np.float64)
-        out[..., :3] = v[..., :3] * A[..., None]
+        out[..., :3] = (k0 + (v[..., :3] - k0) * w[..., None]) * A[..., None]
         out[..., 3] = A
         return out
 
+    def texture_rows(self):
+        """(2 size, size, 4) float32 rows of an RGBA32F texture: (K, D) at
+        ``ivec2(i_back, i_front)``, then the zero-length colour (K0, 0) at
+        ``ivec2(i_back, size + i_front)``."""
+        zero = np.zeros(self.table.shape, np.float32)
+        zero[..., :3] = self.colour0
+        return np.concatenate([self.table, zero])
+
     def texture_bytes(self):
-        """Bytes for a (size, size) RGBA32F texture: x (width) is the back index,
-        y (height) the front index, i.e. ``texelFetch(t, ivec2(i_back, i_front), 0)``."""
-        return np.ascontiguousarray(self.table, dtype=np.float32).tobytes()
+        """Bytes of ``texture_rows``: a (size, 2 size) RGBA32F texture, x (width) the back
+        index, y (height) the front index."""
+        return np.ascontiguousarray(self.texture_rows()).tobytes()
 
     def uniforms(self):
         """The shader's uniforms for this table (the sampler ``t_preint`` aside)."""
-        return {"u_pi_lo": self.lo, "u_pi_scale": self.scale, "u_pi_size": self.size}
+        return {"u_pi_lo": self.lo, "u_pi_scale": self.scale, "u_pi_size": self.size, "u_pi_length": self.length}
 
     def __repr__(self):
         return (f"PreintegrationTable(size={self.size}, lo={self.lo}, hi={self.hi}, "
@@ -371,17 +422,66 @@ def _atoms(P, nodes):
     return x[(x >= nodes[0]) & (x <= nodes[-1])]
 
 
-def build_table(tf, value_range, length, size=TABLE_SIZE) -> PreintegrationTable:
+def _mean_offset(x):
+    """g(x) = 1/x - 1/(e^x - 1) - 1/2: the mean position in [0, 1] under the density
+    e^(-x t), less 1/2 (series below x = 0.5; -1/2 for x = inf)."""
+    x = np.asarray(x, np.float64)
+    small = x < 0.5
+    xs = np.where(small, x, 0.0)
+    series = -xs / 12 * (1 - xs * xs / 60 * (1 - xs * xs / 42))
+    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
+        xb = np.where(small, 1.0, x)
+        direct = 1 / xb - 1 / np.expm1(xb) - 0.5
+    return np.where(small, series, np.where(np.isinf(x), -0.5, direct))
+
+
+def length_weight(depth, nominal_depth):
+    """The weight w of the length correction ``K(L) = K0 + (K(L0) - K0) w`` for a segment of
+    optical depth ``depth`` whose table entry was made at ``nominal_depth``:
+    ``g(depth) / g(nominal_depth)``, exact when the extinction is constant over the
+    segment and the colour linear along it (1 where the nominal depth is 0)."""
+    depth, nominal_depth = np.broadcast_arrays(np.asarray(depth, np.float64), np.asarray(nominal_depth, np.float64))
+    gn = _mean_offset(nominal_depth)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        w = _mean_offset(depth) / np.where(gn != 0, gn, 1.0)
+    return np.where(gn != 0, w, 1.0)
+
+
+def opacity_support(tf, lo, hi):
+    """The smallest [a, b] within [lo, hi] outside which ``tf``'s opacity is zero ([lo,
+    hi] itself when the TF has no opacity at all, or reaches opacity 1: an opaque
+    segment's colour depends on its length in a way the length correction does not
+    follow, and a segment cut short at the table's edge would need it)."""
+    knots = tf.knots
+    alpha = tf.opacity(knots)
+    seen = alpha > 0
+    if not seen.any() or alpha.max() >= 1.0:
+        return lo, hi
+    first = int(np.argmax(seen))
+    last = knots.size - 1 - int(np.argmax(seen[::-1]))
+    a = lo if first == 0 else max(lo, float(knots[first - 1]))
+    b = hi if last == knots.size - 1 else min(hi, float(knots[last + 1]))
+    return (a, b) if a < b else (lo, hi)
+
+
+ZERO_LENGTH = 1e-6     # the zero-length colour's table is made at this fraction of the length
+
+
+def build_table(tf, value_range, length, size=TABLE_SIZE, zero=None) -> PreintegrationTable:
     """The pre-integration table of ``tf`` for segments of nominal ``length`` (world
-    units), over values ``lo = min(value_range[0], first knot)`` to ``hi =
-    max(value_range[1], last knot)`` (so that no data value is clamped); see the module
-    docstring for the method and its accuracy."""
+    units), over the values with opacity (``opacity_support``) within ``min(value_range[0],
+    first knot)`` to ``max(value_range[1], last knot)``: its nodes spend no resolution
+    on values that are transparent anyway (a spike 1 % of the data range wide gets all
+    of them), and a segment reaching beyond them is empty there
+    (``PreintegrationTable.segment``); see the module docstring for the method and its
+    accuracy."""
     _check_tf(tf)
     lo, hi = _value_range(value_range)
     L = _positive_length("length", length)
     N = _table_size(size)
     lo = min(lo, float(tf.knots[0]))
     hi = max(hi, float(tf.knots[-1]))
+    lo, hi = opacity_support(tf, lo, hi)
     if hi <= lo:  # one value only: any width will do, the function is constant near it
         lo, hi = lo - 0.5, lo + 0.5
     nodes = np.linspace(lo, hi, N)
@@ -514,7 +614,14 @@ def build_table(tf, value_range, length, size=TABLE_SIZE) -> PreintegrationTable
     table = np.empty((N, N, 4))
     table[..., :3] = K
     table[..., 3] = np.where(np.isfinite(D), D, OPAQUE_SENTINEL)
-    return PreintegrationTable(lo, hi, N, L, table, tf)
+    if zero is False:               # this is the zero-length table itself
+        return PreintegrationTable(lo, hi, N, L, table, tf)
+    if zero is None:
+        zero = build_table(tf, value_range, ZERO_LENGTH * L, size, zero=False)
+    elif (zero.lo, zero.hi, zero.size) != (lo, hi, N):
+        raise ValueError(f"zero must be a table of the same nodes ({lo}, {hi}, {N}), got "
+                         f"({zero.lo}, {zero.hi}, {zero.size})")
+    return PreintegrationTable(lo, hi, N, L, table, tf, colour0_64=zero.table64[..., :3])
 
 
 def _fill_transparent(K, A, node_colors):
@@ -645,20 +752,27 @@ def exact_segment(tf, s_front, s_back, length) -> np.ndarray:
 
 
 # -------------------------------------------------------------- the length approximation
-def length_correction_error(tf, value_range, length, ratios, size=TABLE_SIZE) -> dict:
-    """Largest absolute colour error (premultiplied, any channel) of ``K(L0) * A(L)``
-    against the exact colour at ``L = ratio * L0``, over all pairs of table nodes. The
+def length_correction_error(tf, value_range, length, ratios, size=TABLE_SIZE, corrected=True) -> dict:
+    """Largest absolute colour error (premultiplied, any channel) of the colour at ``L =
+    ratio * L0`` against the exact one, over all pairs of table nodes: the length
+    correction ``K0 + (K(L0) - K0) w`` (``corrected=False``: ``K(L0)``) times ``A(L)``. The
     exact colour at L comes from a table built for L (exact at the nodes to ~1e-12,
-    checked against :func:`exact_segment` by the tests). Returns {ratio: error}."""
+    checked against :func:`exact_segment` by the tests); opaque entries are left out
+    (their colour is exact only at L0). Returns {ratio: error}."""
     base = build_table(tf, value_range, length, size)
     D = base.table64[..., 3]
+    finite = D < OPAQUE_SENTINEL
     out = {}
     for r in ratios:
         r = _positive_length("ratio", r)
         Lr = r * base.length
-        ref = build_table(tf, value_range, Lr, size)
+        ref = build_table(tf, value_range, Lr, size, zero=False)
         with np.errstate(over="ignore"):
             Ar = -np.expm1(-Lr * D)
-        err = np.abs((base.table64[..., :3] - ref.table64[..., :3]) * Ar[..., None])
-        out[r] = float(err.max())
+        K = base.table64[..., :3]
+        if corrected:
+            K0 = base.colour0_64
+            K = K0 + (K - K0) * length_weight(Lr * D, base.length * D)[..., None]
+        err = np.abs((K - ref.table64[..., :3]) * Ar[..., None])
+        out[r] = float(err[finite].max())
     return out

@@ -14,7 +14,6 @@ from .gl.programs import ProgramCache
 from .progress import Progress
 from .cache import LRU, IdentityKey as _Key, TableCache
 from .techniques import check_options, get_technique
-from .techniques.common import preintegration_applies
 
 
 class Renderer:
@@ -65,6 +64,7 @@ class Renderer:
         self._vaos = {}
         self.tables = TableCache()
         self._error_models = LRU(64)   # tolerance: pilot view and options -> tolerance.ErrorModel
+        self._tolerance_picks = LRU(64)  # tolerance: pilot view, options and RMSE -> the Choice timed fastest
         self._resources = {}  # kind -> LRU: what techniques keep on the GPU (see resource)
         self._idle_fbo = idle_framebuffer(self.ctx)  # bound before any target is released
 
@@ -149,8 +149,8 @@ class Renderer:
         if tolerance is not None:
             if step is not None:
                 raise ValueError(f"give tolerance or step, not both (got step={step!r}, tolerance={tolerance!r})")
-            step, preintegrate = self.tolerance_settings(scene, tolerance, technique, **options)
-            options = dict(options, preintegrate=preintegrate)
+            step, chosen = self.tolerance_settings(scene, tolerance, technique, **options)
+            options = dict(options, **chosen)
         self._revive()
         with current(self.ctx):
             edge = self.max_tile
@@ -183,35 +183,47 @@ class Renderer:
     last_choice = None      # the tolerance.Choice of the last render(tolerance=...)
 
     def tolerance_settings(self, scene, tolerance, technique="raycast", **options):
-        """(step, preintegrate) for an RMSE of ``tolerance`` against the exact image
+        """(step, options) for an RMSE of ``tolerance`` against the exact image
         (``dvr_gl.tolerance``; also ``last_choice``): the error model of the scene's
-        pilot view is measured once and kept."""
+        pilot view is measured once per way of sampling and kept, and so is the choice
+        among them."""
         from . import tolerance as tol
         if technique != "raycast":
             raise ValueError(f"tolerance chooses the ray caster's step; technique {technique!r} takes its "
                              f"own options (use technique='raycast')")
         check_options(technique, options)
         tolerance = tol.check_tolerance(tolerance)
+        pilot_key = (tol.pilot_scene(scene).digest(), repr(sorted(options.items())))
 
-        def choice(preintegrate):
+        def choice(sampling):
             # the model depends on the pilot alone: images of one view at any size share it
-            key = (tol.pilot_scene(scene).digest(), repr(sorted(options.items())), preintegrate)
+            key = pilot_key + (tuple(sorted(sampling.items())),)
             # the pilot measures the step's error alone
-            opts = dict(options, ert_transmittance=0.0, preintegrate=preintegrate)
+            opts = dict(options, ert_transmittance=0.0, **sampling)
 
             def pilot(s, h):
                 return self.render(s, technique, step=h, **opts)
 
             model = self._error_models.get(key, lambda: tol.measure(pilot, scene))
-            model, chosen = tol.verified(model, pilot, scene, tolerance, preintegrate)
+            model, chosen = tol.verified(model, pilot, scene, tolerance, sampling)
             self._error_models.put(key, model)        # with the steps verified, for the next request
             return chosen
 
-        if "preintegrate" in options:
-            self.last_choice = choice(bool(options["preintegrate"]))
+        if "preintegrate" in options or "refine" in options:      # the caller's say is kept
+            ways = [{"preintegrate": bool(options.pop("preintegrate", False)), "refine": options.pop("refine", 1)}]
         else:
-            self.last_choice = tol.cheaper(choice(False), choice(True) if preintegration_applies(scene) else None)
-        return self.last_choice.step, self.last_choice.preintegrate
+            ways = tol.samplings(scene)
+        if len(ways) == 1:
+            self.last_choice = choice(ways[0])
+        else:
+            def pick():
+                def frame_seconds(chosen):
+                    timed = tol.timing_scene(scene)
+                    return tol.median_seconds(lambda: self.render(timed, technique, step=chosen.step,
+                                                                  **dict(options, **chosen.sampling)))
+                return tol.fastest([choice(way) for way in ways], frame_seconds)
+            self.last_choice = self._tolerance_picks.get(pilot_key + (tolerance,), pick)
+        return self.last_choice.step, dict(self.last_choice.sampling)
 
     @property
     def max_tile(self):
@@ -316,7 +328,7 @@ class Renderer:
 
     def preintegration_texture(self, table):
         def make():
-            tex = self.ctx.texture((table.size, table.size), 4, table.texture_bytes(), dtype="f4")
+            tex = self.ctx.texture((table.size, 2 * table.size), 4, table.texture_bytes(), dtype="f4")
             tex.filter = (self.ctx.NEAREST, self.ctx.NEAREST)
             self.created.append(("preintegration", (table.size, table.size)))
             return tex

@@ -21,9 +21,13 @@ whose predicted error is ``SAFETY * E``, between ``MIN_STEP`` and ``MAX_STEP`` v
 pilot is then rendered at that step, its error measured and added to the model, and the
 step chosen again (``verified``), since the error between the pilot's octaves is not
 smooth in the step.
-Unless the caller says ``preintegrate=``, a second pilot measures pre-integrated segments,
-and the cheaper of the two choices is taken (``PREINTEGRATION_COST``): a narrow TF
-feature needs very short plain steps but not pre-integrated ones.
+Unless the caller says ``preintegrate=`` or ``refine=``, further pilots measure
+pre-integrated segments and, where the TF has detail within reach of the data, refined
+pre-integrated segments (``refine=REFINE_PARTS``): a narrow TF feature needs very short
+plain steps but not pre-integrated ones, and refined ones spend their samples only where
+it is crossed. Each way's choice is then rendered at up to ``TIMING_SIDE`` pixels a side
+(median of ``TIMING_REPEATS``) and the fastest is taken: what a refined segment costs
+depends on how many the TF's detail touches, so it is measured rather than assumed.
 ``SAFETY`` (0.7) covers what a pilot's pixels do not see of the full image. What was chosen
 and predicted is on ``Renderer.last_choice``; the error model is kept per scene, view and
 options, so another tolerance or a repeated frame costs no pilot.
@@ -44,9 +48,12 @@ MIN_STEP, MAX_STEP = 1.0 / 64.0, 2.0     # in voxels (the smallest spacing)
 PILOT_STEPS = (1.0, 0.5, 0.25, 0.125)    # voxels
 VERIFY_ROUNDS = 3                        # pilot frames at chosen steps, at most
 # a pre-integrated step's cost over a plain one's (measured 2.05x to 2.7x at 512x512 on the
-# CT head and chest CT, skipping off for it): pre-integration is chosen where its step is
-# longer than that many plain steps (narrow TF features)
+# CT head and chest CT, skipping off for it), and a refined one's at least: a way whose
+# step is dearer by this estimate than 4x the cheapest is not timed
 PREINTEGRATION_COST = 2.5
+REFINE_PARTS = 4                         # parts of a refined pre-integrated segment
+TIMING_SIDE = 128
+TIMING_REPEATS = 3
 
 
 @dataclass(frozen=True)
@@ -62,6 +69,64 @@ class Choice:
     pilot_size: tuple
     pilot_seconds: float
     preintegrate: bool = False
+    refine: int = 1
+    frame_seconds: float = None    # the frame time it was picked on, at TIMING_SIDE (None: not timed)
+
+    @property
+    def sampling(self):
+        """The ray caster's options for this way of sampling."""
+        return {"preintegrate": self.preintegrate, "refine": self.refine}
+
+
+PLAIN = {"preintegrate": False, "refine": 1}
+
+
+def samplings(scene):
+    """The ways of sampling a tolerance request weighs for ``scene``: plain midpoint
+    samples; pre-integrated segments where they apply; and refined ones where the TF has
+    detail that the data's values can reach."""
+    from .techniques.common import preintegration_applies
+    from .techniques.raycast import detail_knots
+    ways = [dict(PLAIN)]
+    if preintegration_applies(scene):
+        ways.append({"preintegrate": True, "refine": 1})
+        lo, hi = scene.volume.data_range
+        knots = detail_knots(scene.tf)
+        if np.any((knots > lo - (hi - lo)) & (knots < hi + (hi - lo))):
+            ways.append({"preintegrate": True, "refine": REFINE_PARTS})
+    return ways
+
+
+def timing_scene(scene):
+    """The view timed to compare the ways of sampling: at most TIMING_SIDE pixels a side."""
+    scale = min(1.0, TIMING_SIDE / max(scene.width, scene.height))
+    return scene.replace(width=max(8, round(scene.width * scale)), height=max(8, round(scene.height * scale)))
+
+
+def median_seconds(frame):
+    """The median time of TIMING_REPEATS calls of ``frame`` after one untimed call (which
+    builds tables and compiles the shader); ``frame`` returns the image, read back."""
+    frame()
+    times = []
+    for _ in range(TIMING_REPEATS):
+        t0 = time.perf_counter()
+        frame()
+        times.append(time.perf_counter() - t0)
+    return float(np.median(times))
+
+
+def estimated_cost(choice):
+    """Frame cost in plain steps per voxel: a lower bound for refined segments."""
+    return (PREINTEGRATION_COST if choice.preintegrate else 1.0) / choice.step_voxels
+
+
+def fastest(choices, frame_seconds):
+    """The Choice whose frame is fastest by ``frame_seconds(choice)``; those whose
+    estimated cost is over 4x the lowest are not timed."""
+    cheapest = min(estimated_cost(c) for c in choices)
+    timed = [dataclasses.replace(c, frame_seconds=frame_seconds(c)) for c in choices
+             if estimated_cost(c) <= 4 * cheapest]
+    return min(timed, key=lambda c: c.frame_seconds)
 
 
 def check_tolerance(tolerance):
@@ -171,7 +236,7 @@ def measure(render, scene):
                       reference=reference)
 
 
-def verified(model, render, scene, tolerance, preintegrate=False):
+def verified(model, render, scene, tolerance, sampling=PLAIN):
     """(model, Choice): the step for ``tolerance``, checked on the pilot. The error is not
     a smooth function of the step between the pilot's octaves (samples fall elsewhere on
     the features), so an interpolated step is rendered on the pilot, its error measured
@@ -180,11 +245,12 @@ def verified(model, render, scene, tolerance, preintegrate=False):
     step returned is one whose pilot error was measured within ``SAFETY * E`` where any
     was; the answer is kept, so asking again costs nothing and gives the same step."""
     tolerance = check_tolerance(tolerance)
-    key = (tolerance, bool(preintegrate))
+    sampling = dict(PLAIN, **sampling)
+    key = (tolerance, tuple(sorted(sampling.items())))
     if key in model.choices:
         return model, model.choices[key]
     target = SAFETY * tolerance
-    choice = choose_step(model, scene, tolerance, preintegrate)
+    choice = choose_step(model, scene, tolerance, sampling)
 
     def measured(k):
         return next((e for s, e in zip(model.steps, model.errors) if abs(k - s) <= 1e-9 * k), None)
@@ -201,7 +267,7 @@ def verified(model, render, scene, tolerance, preintegrate=False):
             model = model.with_point(choice.step_voxels, error, time.perf_counter() - t0)
             if error <= target:
                 break
-            choice = choose_step(model, scene, tolerance, preintegrate)
+            choice = choose_step(model, scene, tolerance, sampling)
             if choice.step_voxels < min(PILOT_STEPS):
                 break
         error = measured(choice.step_voxels)
@@ -210,23 +276,15 @@ def verified(model, render, scene, tolerance, preintegrate=False):
             k = max(within)
             choice = Choice(tolerance=tolerance, step=k * scene.volume.min_spacing, step_voxels=k,
                             predicted_rmse=model.predict(k), order=model.order, pilot_size=model.pilot_size,
-                            pilot_seconds=model.pilot_seconds, preintegrate=preintegrate)
+                            pilot_seconds=model.pilot_seconds, **sampling)
     choice = dataclasses.replace(choice, pilot_seconds=model.pilot_seconds)
     model.choices[key] = choice
     return model, choice
 
 
-def cheaper(plain, preintegrated):
-    """The Choice whose frame costs less: plain steps against pre-integrated ones at
-    PREINTEGRATION_COST each (``preintegrated`` None: not possible)."""
-    if preintegrated is None or plain.step_voxels * PREINTEGRATION_COST >= preintegrated.step_voxels:
-        return plain
-    return preintegrated
-
-
-def choose_step(model, scene, tolerance, preintegrate=False):
+def choose_step(model, scene, tolerance, sampling=PLAIN):
     """The Choice for RMSE ``tolerance`` under ``model`` (an ErrorModel of ``scene``,
-    measured with or without pre-integration as ``preintegrate`` says)."""
+    measured with the ray caster's ``sampling`` options)."""
     tolerance = check_tolerance(tolerance)
     if max(model.errors) == 0.0:
         steps = MAX_STEP
@@ -235,4 +293,4 @@ def choose_step(model, scene, tolerance, preintegrate=False):
     steps = min(max(steps, MIN_STEP), MAX_STEP)
     return Choice(tolerance=tolerance, step=steps * scene.volume.min_spacing, step_voxels=steps,
                   predicted_rmse=model.predict(steps), order=model.order, pilot_size=model.pilot_size,
-                  pilot_seconds=model.pilot_seconds, preintegrate=preintegrate)
+                  pilot_seconds=model.pilot_seconds, **dict(PLAIN, **sampling))

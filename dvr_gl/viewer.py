@@ -735,9 +735,9 @@ class Viewer:
         scene = self._scene(width, height)
         if self.tolerance is not None and self.technique == "raycast" and not coarse:
             # progressive: coarse frames while the view moves, then the step (and
-            # pre-integration) the error model picks for the tolerance, once it is still
-            step, preintegrate = self.renderer.tolerance_settings(scene, self.tolerance, "raycast", **options)
-            options["preintegrate"] = preintegrate
+            # way of sampling) the error model picks for the tolerance, once it is still
+            step, sampling = self.renderer.tolerance_settings(scene, self.tolerance, "raycast", **options)
+            options.update(sampling)
         return scene, self.technique, step, options
 
     def _accumulates(self):

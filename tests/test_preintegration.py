@@ -14,7 +14,7 @@ import pytest
 import dvr_gl
 from dvr_gl.gl import harness
 from dvr_gl.preintegration import (OPAQUE_SENTINEL, TABLE_SIZE, PreintegrationTable, build_table,
-                                   exact_segment, length_correction_error, mean_extinction)
+                                   exact_segment, length_correction_error, mean_extinction, opacity_support)
 
 U32 = 2.0 ** -24
 TOL_EXACT = 1e-11          # table64 vs exact_segment (measured: ~1e-14)
@@ -154,20 +154,22 @@ def test_table_nodes_match_exact_segment(name, length_over_unit):
             assert ref[3] == 1.0 and got[3] == 1.0
     assert worst_c <= TOL_EXACT
     assert worst_k <= 1e-9
-    # the float32 table is the float64 one rounded
-    np.testing.assert_allclose(table.table, table.table64, rtol=U32, atol=0)
+    # the float32 table is the float64 one rounded (subnormals to their absolute spacing)
+    np.testing.assert_allclose(table.table, table.table64, rtol=U32, atol=np.finfo(np.float32).smallest_subnormal)
 
 
 def test_table_special_segments():
     """Crossing the spike both ways, ending on and starting at alpha = 1, inside a
-    plateau, and inside a region of zero opacity."""
+    plateau, and inside a region of zero opacity: exact at the nodes."""
     L = 0.02
-    for tf, pairs in ((SPIKE, [(0.49, 0.52), (0.52, 0.49), (0.5, 0.5), (0.495, 0.505), (0.505, 0.495),
-                               (0.2, 0.3)]),
+    for tf, pairs in ((SPIKE, [(0.4975, 0.5025), (0.5025, 0.4975), (0.5, 0.5), (0.498, 0.502), (0.502, 0.498)]),
                       (PLATEAU, [(0.1, 0.4), (0.4, 0.1), (0.5, 0.55), (0.7, 0.5), (0.0, 0.15), (0.1, 0.9)]),
                       (POINT, [(0.3, 0.5), (0.5, 0.8), (0.8, 0.5), (0.2, 0.7)])):
-        # nodes every 0.005 on [-0.1, 1.1]: all the values above are nodes
-        table = build_table(tf, VALUE_RANGE, L, 241)
+        # nodes every 0.005 (the spike's: every 0.0005) over the values with opacity
+        # (all of them for a TF that reaches alpha = 1): every value above is a node
+        lo, hi = opacity_support(tf, *VALUE_RANGE)
+        table = build_table(tf, VALUE_RANGE, L, int(round((hi - lo) / (0.0005 if tf is SPIKE else 0.005))) + 1)
+        assert (table.lo, table.hi) == ((0.4975, 0.5025) if tf is SPIKE else (-0.1, 1.1))
         for a, b in pairs:
             i, j = (int(round((v - table.lo) * table.scale)) for v in (a, b))
             ref = exact_segment(tf, table.nodes[i], table.nodes[j], L)
@@ -177,6 +179,38 @@ def test_table_special_segments():
     i, j = (int(round((v - table.lo) * table.scale)) for v in (0.0, 0.15))
     assert table.table64[i, j, 3] == 0 and np.all(np.isfinite(table.table64[..., :3]))
     np.testing.assert_array_equal(table.segment(table.nodes[i], table.nodes[j], L), 0.0)
+
+
+def test_segments_reaching_beyond_the_values_with_opacity():
+    """The spike's table spans the spike alone; a segment from outside it into it (or
+    across it) is empty outside and counts with its share of the length within, its
+    colour moved towards K0 by the length correction. Against the definition: within
+    2e-3, and at most 0.15x the error of K at the nominal length (measured 0.03x to
+    0.13x); segments entirely outside are exactly zero."""
+    L = 0.02
+    table = build_table(SPIKE, VALUE_RANGE, L, 81)
+    for a, b in [(0.49, 0.52), (0.52, 0.49), (0.495, 0.505), (0.505, 0.495), (0.3, 0.5), (0.5, 0.9)]:
+        ref = exact_segment(SPIKE, a, b, L)
+        got = table.segment(a, b, L)
+        share = table.inside_fraction(a, b)
+        uncorrected = table.interpolate(a, b)[:3] * got[3]
+        assert share < 1
+        np.testing.assert_allclose(got[3], ref[3], rtol=4 * U32, atol=1e-12)     # D: float32 at the nodes
+        assert np.abs(got - ref).max() <= 2e-3, (a, b, got, ref)
+        assert np.abs(got - ref).max() <= 0.15 * np.abs(uncorrected - ref[:3]).max() + 1e-9, (a, b)
+    np.testing.assert_array_equal(table.segment(0.1, 0.3, L), 0.0)
+    np.testing.assert_array_equal(table.segment(0.6, 0.9, L), 0.0)
+
+
+def test_length_correction_errs_far_less_than_the_nominal_colour():
+    """``K0 + (K(L0) - K0) w`` against the exact colour at other lengths (tables made for
+    those lengths, exact at the nodes), over all pairs of nodes: the uncorrected K(L0)
+    errs 20x to 1000x more on a ramp and a spike (measured by length_correction_error)."""
+    for tf in (RAMP, SPIKE):
+        plain = length_correction_error(tf, (0.0, 1.0), tf.unit_distance, (0.1, 0.5, 1.5), size=65, corrected=False)
+        corrected = length_correction_error(tf, (0.0, 1.0), tf.unit_distance, (0.1, 0.5, 1.5), size=65)
+        for r in plain:
+            assert corrected[r] <= plain[r] / 5, (tf, r, corrected[r], plain[r])
 
 
 def test_constant_segments_match_the_per_sample_formula():
@@ -250,21 +284,32 @@ def test_build_time_of_the_default_table():
 
 # -- layout, ranges, input checks ------------------------------------------------------------
 
-def test_range_covers_data_and_knots_and_layout():
-    table = build_table(SPIKE, (0.2, 3.0), 0.01, 9)
-    assert (table.lo, table.hi) == (0.0, 3.0)
+def test_range_covers_the_values_with_opacity_and_layout():
+    """The nodes span the values with opacity within the data and the knots: all of the
+    data for a TF opaque at its last knot, just the spike for a spike."""
+    table = build_table(RAMP, (0.2, 3.0), 0.01, 9)
+    assert (table.lo, table.hi) == (0.0, 3.0)          # transparent below 0, opaque to the data's end
     np.testing.assert_allclose(table.scale, 8 / 3.0)
     np.testing.assert_allclose(table.nodes, np.linspace(0.0, 3.0, 9))
-    assert build_table(SPIKE, (-5.0, 0.5), 0.01, 9).lo == -5.0
-    raw = np.frombuffer(table.texture_bytes(), np.float32).reshape(9, 9, 4)
-    np.testing.assert_array_equal(raw, table.table)   # row (y) = front node, x = back node
+    assert build_table(RAMP, (-5.0, 0.5), 0.01, 9).lo == 0.0
+    spike = build_table(SPIKE, (-5.0, 3.0), 0.01, 9)
+    assert (spike.lo, spike.hi) == (0.4975, 0.5025)
+    raw = np.frombuffer(table.texture_bytes(), np.float32).reshape(18, 9, 4)
+    np.testing.assert_array_equal(raw[:9], table.table)   # row (y) = front node, x = back node
+    np.testing.assert_array_equal(raw[9:, :, :3], table.colour0)   # then the zero-length colour
+    np.testing.assert_array_equal(raw[9:, :, 3], 0.0)
+    # no opacity anywhere: the data and knots, as before
+    clear = TF(color=[(0.0, 1, 0, 0), (1.0, 0, 1, 0)], opacity=[(0.0, 0.0), (1.0, 0.0)])
+    assert (build_table(clear, (0.2, 3.0), 1.0, 4).lo, build_table(clear, (0.2, 3.0), 1.0, 4).hi) == (0.0, 3.0)
     # a single value and a single knot: the table still spans a unit interval
     one = TF(color=[(2.0, 1, 0, 0)], opacity=[(2.0, 0.5)])
     t1 = build_table(one, (2.0, 2.0), 1.0, 4)
     assert t1.hi > t1.lo and np.isfinite(t1.scale)
     np.testing.assert_allclose(t1.segment(2.0, 2.0, 1.0), [0.5, 0, 0, 0.5], atol=1e-7)
-    # values outside [lo, hi] clamp to the ends
-    np.testing.assert_array_equal(table.segment(-10.0, 99.0, 0.02), table.segment(0.0, 3.0, 0.02))
+    # beyond the table's values a segment is empty: only its part within counts
+    np.testing.assert_allclose(spike.segment(-10.0, 99.0, 0.02),
+                               spike.segment(spike.lo, spike.hi, 0.02 * 0.005 / 109.0), rtol=1e-12, atol=0)
+    np.testing.assert_array_equal(spike.segment(0.6, 0.9, 0.02), 0.0)
 
 
 @pytest.mark.parametrize("kwargs, match", [
@@ -321,7 +366,7 @@ def test_preintegrated_segment_matches_numpy_twin(ctx):
     sb[6:26] = nodes[rng.integers(0, 96, 20)]
     inp = np.c_[sf, sb, length, np.zeros(n)].astype(np.float32)
     with ctx:
-        tex = ctx.texture((table.size, table.size), 4, table.texture_bytes(), dtype="f4")
+        tex = ctx.texture((table.size, 2 * table.size), 4, table.texture_bytes(), dtype="f4")
         tex.filter = (ctx.NEAREST, ctx.NEAREST)
     try:
         gl = harness.evaluate(ctx, ["common/preintegration.glsl"],

@@ -117,7 +117,7 @@ def preintegration_applies(scene):
 def preintegration_table(scene, step, tables):
     """The scene's pre-integrated table for segments ``step`` long (built once per TF,
     value range and step)."""
-    from ..preintegration import build_table
+    from ..preintegration import ZERO_LENGTH, build_table
     if scene.optical_model != "emission_absorption":
         raise ValueError(f"preintegrate tables emission-absorption segments; optical_model "
                          f"{scene.optical_model!r} is sampled at segment midpoints (preintegrate=False)")
@@ -129,13 +129,16 @@ def preintegration_table(scene, step, tables):
         raise ValueError(f"preintegrate tables the TF's own extinction; {' and '.join(scaled)} enhancement "
                          f"scales it per sample (preintegrate=False)")
     volume, tf = scene.volume, scene.tf
+    # the zero-length colour does not depend on the length: one per TF for all steps
+    zero = tables.get("preintegration_zero", volume, tf, make=lambda v, t: build_table(
+        t, v.data_range, ZERO_LENGTH * v.min_spacing, zero=False))
     return tables.get("preintegration", volume, tf, step,
-                      make=lambda v, t, length: build_table(t, v.data_range, length))
+                      make=lambda v, t, length: build_table(t, v.data_range, length, zero=zero))
 
 
 def preintegration_uniforms(table):
     """Uniforms of shaders/common/preintegration.glsl."""
-    return {"u_pi_lo": table.lo, "u_pi_scale": table.scale, "u_pi_size": table.size}
+    return {"u_pi_lo": table.lo, "u_pi_scale": table.scale, "u_pi_size": table.size, "u_pi_length": table.length}
 
 
 def point_shading_defines(scene):

@@ -431,6 +431,7 @@ def draw(renderer, plan):
         detail = np.zeros((MAX_DETAIL, 2), np.float32)
         detail[:len(plan.detail)] = plan.detail
         uniforms.update({"u_detail_count": len(plan.detail), "u_refine": plan.refine,
+                         "u_pi_fine_length": plan.preint_fine.length,
                          "u_refine_cuts": refine_cuts(plan)})
     if plan.ert_transmittance > 0:
         uniforms["u_ert_transmittance"] = plan.ert_transmittance
@@ -461,8 +462,8 @@ def draw(renderer, plan):
 def _stacked_tables(ctx, coarse, fine):
     """The nominal-length table in rows 0 .. size - 1 and the refined parts' table
     below it (``preintegratedSegmentIn``)."""
-    data = np.concatenate([np.asarray(coarse.table, np.float32), np.asarray(fine.table, np.float32)])
-    tex = ctx.texture((coarse.size, 2 * coarse.size), 4, np.ascontiguousarray(data).tobytes(), dtype="f4")
+    data = np.concatenate([coarse.texture_rows(), fine.texture_rows()])
+    tex = ctx.texture((coarse.size, 4 * coarse.size), 4, np.ascontiguousarray(data).tobytes(), dtype="f4")
     tex.filter = (ctx.NEAREST, ctx.NEAREST)
     return tex
 

@@ -5,25 +5,50 @@
 
 #include "common/compositing.glsl"
 
-uniform sampler2D t_preint;   // (size, size) RGBA32F: x = back node, y = front node;
-                              // (K_r, K_g, K_b, D): colour per unit opacity at the
-                              // table's nominal length, mean extinction (1e30: opaque).
-                              // With refinement (raycast), a second table of the same
-                              // nodes for the shorter parts follows in rows size.. 2 size - 1
+uniform sampler2D t_preint;   // (size, 2 size) RGBA32F: x = back node, y = front node;
+                              // rows 0 .. size - 1: (K_r, K_g, K_b, D), the colour per
+                              // unit opacity at the table's nominal length and the mean
+                              // extinction (1e30: opaque); rows size .. 2 size - 1: (K0, 0),
+                              // the colour per unit opacity as the length goes to 0. With
+                              // refinement (raycast), the shorter parts' table follows in
+                              // rows 2 size .. 4 size - 1, laid out the same.
 uniform float u_pi_lo;        // data value of node 0
 uniform float u_pi_scale;     // nodes per data unit
 uniform int u_pi_size;
+uniform float u_pi_length;    // the nominal length of the table in rows 0 .. 2 size - 1
+
+// g(x) = 1/x - 1/(e^x - 1) - 1/2: the mean position in [0, 1] under the density e^(-x t),
+// less 1/2 (series below 0.5; -1/2 as x grows without bound)
+float meanOffset(float x) {
+    if (x < 0.5) {
+        float x2 = x * x;
+        return -x / 12.0 * (1.0 - x2 / 60.0 * (1.0 - x2 / 42.0));
+    }
+    if (x > 80.0) return 1.0 / x - 0.5;
+    return 1.0 / x - 1.0 / expm1Accurate(x) - 0.5;
+}
 
 // Premultiplied (C, A) of a segment len world units long along which the scalar goes
-// linearly from s_front (nearest the eye) to s_back. (K, D) are interpolated
-// bilinearly here, in full float precision (the texture unit's filter weights are the
-// rasteriser's business), back index first, then front. The opacity 1 - exp(-len D) is
-// exact for every length; the colour K * A is exact at the table's nominal length.
-vec4 preintegratedSegmentIn(int first_row, float s_front, float s_back, float len) {
+// linearly from s_front (nearest the eye) to s_back, from the table in rows first_row ..
+// first_row + 2 size - 1 made for segments `nominal` long. The table's values are
+// interpolated bilinearly here, in full float precision (the texture unit's filter
+// weights are the rasteriser's business), back index first, then front. The opacity
+// 1 - exp(-len D) is exact for every length. The colour per unit opacity is K at the
+// nominal length and moves towards K0 as the segment shortens, by the weight that is
+// exact for a constant extinction and a linear colour (preintegration.length_weight).
+vec4 preintegratedSegmentIn(int first_row, float s_front, float s_back, float len, float nominal) {
     if (len <= 0.0) return vec4(0.0);
     float last = float(u_pi_size - 1);
-    float uf = clamp((s_front - u_pi_lo) * u_pi_scale, 0.0, last);
-    float ub = clamp((s_back - u_pi_lo) * u_pi_scale, 0.0, last);
+    float uf_raw = (s_front - u_pi_lo) * u_pi_scale;
+    float ub_raw = (s_back - u_pi_lo) * u_pi_scale;
+    float uf = clamp(uf_raw, 0.0, last);
+    float ub = clamp(ub_raw, 0.0, last);
+    // the table holds every value with opacity: a segment reaching beyond it is empty
+    // there, and counts with the length of its part within (the field linear along it)
+    if (uf != uf_raw || ub != ub_raw) {
+        float span = abs(ub_raw - uf_raw);
+        len *= span > 0.0 ? clamp(abs(ub - uf) / span, 0.0, 1.0) : 0.0;
+    }
     int f0 = min(int(floor(uf)), u_pi_size - 2);
     int b0 = min(int(floor(ub)), u_pi_size - 2);
     float wf = uf - float(f0);
@@ -34,16 +59,25 @@ vec4 preintegratedSegmentIn(int first_row, float s_front, float s_back, float le
     vec4 row1 = texelFetch(t_preint, ivec2(b0, f0 + 1), 0) * (1.0 - wb)
               + texelFetch(t_preint, ivec2(b0 + 1, f0 + 1), 0) * wb;
     vec4 v = row0 * (1.0 - wf) + row1 * wf;
+    int z0 = f0 + u_pi_size;
+    vec3 zero0 = texelFetch(t_preint, ivec2(b0, z0), 0).rgb * (1.0 - wb)
+               + texelFetch(t_preint, ivec2(b0 + 1, z0), 0).rgb * wb;
+    vec3 zero1 = texelFetch(t_preint, ivec2(b0, z0 + 1), 0).rgb * (1.0 - wb)
+               + texelFetch(t_preint, ivec2(b0 + 1, z0 + 1), 0).rgb * wb;
+    vec3 k0 = zero0 * (1.0 - wf) + zero1 * wf;
     float od = len * v.a;
+    float g_nominal = meanOffset(nominal * v.a);
+    float w = g_nominal != 0.0 ? meanOffset(od) / g_nominal : 1.0;
+    vec3 k = k0 + (v.rgb - k0) * w;
     // exp(-88) is below float's smallest normal: the segment is opaque (this also
     // covers the sentinel D = 1e30 and a product that overflows to +inf)
     float a = od > 88.0 ? 1.0 : -expm1Accurate(-od);
-    return vec4(v.rgb * a, a);
+    return vec4(k * a, a);
 }
 
-// The same from the table of the nominal length (rows 0 .. size - 1).
+// The same from the table of the nominal length u_pi_length (rows 0 .. 2 size - 1).
 vec4 preintegratedSegment(float s_front, float s_back, float len) {
-    return preintegratedSegmentIn(0, s_front, s_back, len);
+    return preintegratedSegmentIn(0, s_front, s_back, len, u_pi_length);
 }
 
 #endif

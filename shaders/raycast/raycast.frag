@@ -90,6 +90,7 @@ uniform float u_reach_block;
 uniform vec2 u_detail[MAX_DETAIL];  // value intervals holding the TF's detail knots
 uniform int u_detail_count;
 uniform int u_refine;         // even parts per refined segment
+uniform float u_pi_fine_length; // the nominal length of their table
 uniform int u_refine_cuts;    // a bound on a refined segment's cuts (its parts and faces)
 // Can a value in [lo, hi] lie on a knot where the TF's opacity bends?
 bool touchesDetail(float lo, float hi) {
@@ -286,7 +287,7 @@ void main() {
                 float t_even = even < u_refine ? a + float(even) * part : b;
                 float t_next = min(min(t_even, min(t_face.x, min(t_face.y, t_face.z))), b);
                 float s_next = t_next < b ? sampleVolume(origin + t_next * dir) : s_back;
-                vec4 piece = preintegratedSegmentIn(u_pi_size, s_prev, s_next, t_next - t_prev);
+                vec4 piece = preintegratedSegmentIn(2 * u_pi_size, s_prev, s_next, t_next - t_prev, u_pi_fine_length);
                 segment.rgb += (1.0 - segment.a) * piece.rgb;
                 segment.a += (1.0 - segment.a) * piece.a;
                 if (t_even <= t_next) even += 1;
