@@ -341,6 +341,7 @@ def cmd_render(args, out=None):
     if choice is not None:
         step = (f"step {choice.step:g} ({choice.step_voxels:.3g} voxel) for tolerance {choice.tolerance:g}, "
                 f"predicted RMSE {choice.predicted_rmse:.2g}")
+        step += ", preintegrate" * choice.preintegrate + f", refine {choice.refine}" * (choice.refine > 1)
     extras = [f"{k} {v}" if not isinstance(v, bool) else k for k, v in render_kwargs.items()
               if k not in ("technique", "step", "sort", "tolerance")]
     step += "".join(", " + e for e in extras)

@@ -157,6 +157,9 @@ def add_render_options(r):
                         "(measured on a small pilot of the same view); not with --step")
     r.add_argument("--preintegrate", action="store_true",
                    help="pre-integrated classification of whole segments (composite mode)")
+    r.add_argument("--refine", type=whole_number(1), metavar="K",
+                   help="raycast with --preintegrate: cut segments that may cross a bend of the TF's "
+                        "opacity into K parts and at cell faces (adaptive sampling; default: 1, none)")
     r.add_argument("--interpolate", type=_count, metavar="K",
                    help="slice2d: K intermediate slices per cell (default: 0)")
     r.add_argument("--proxy", choices=("cpu", "vertex"),
@@ -229,7 +232,7 @@ def add_orientation_option(group):
 
 # which technique takes which option
 TECHNIQUE_OPTIONS = {"interpolate": ("slice2d",), "proxy": ("slice3d",), "shells": ("slice3d",),
-                     "preintegrate": ("raycast", "slice2d", "slice3d"), "sort": ("tetra",),
+                     "preintegrate": ("raycast", "slice2d", "slice3d"), "refine": ("raycast",), "sort": ("tetra",),
                      "repetitions": ("particles",), "seed": ("particles",), "radius": ("particles", "splat"),
                      "sampler": ("particles",), "density": ("splat",), "cutoff": ("splat",), "kernel": ("splat",),
                      "gradients": ("raycast", "slice2d", "slice3d"), "tolerance": ("raycast",)}
@@ -263,7 +266,9 @@ def technique_options(args):
     kwargs = {"technique": args.technique}
     if getattr(args, "tolerance", None) is not None and args.step is not None:
         raise UsageError("--tolerance", "chooses the step: leave out --step")
-    for name in ("step", "tolerance", "preintegrate", "interpolate", "proxy", "shells", "sort", "repetitions",
+    if (getattr(args, "refine", None) or 1) > 1 and not getattr(args, "preintegrate", False):
+        raise UsageError("--refine", f"cuts pre-integrated segments: add --preintegrate (got --refine {args.refine})")
+    for name in ("step", "tolerance", "preintegrate", "refine", "interpolate", "proxy", "shells", "sort", "repetitions",
                  "seed", "radius", "sampler", "kernel", "density", "cutoff", "gradients", "target"):
         value = getattr(args, name, None)
         if value is None or value is False:

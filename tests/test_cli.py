@@ -145,6 +145,9 @@ BAD = [
     (["--optical-model", "emission", "--technique", "splat"], "--optical-model", "not splat"),
     (["--optical-model", "emission", "--preintegrate"], "--optical-model", "leave out --preintegrate"),
     (["--optical-model", "sabella", "--technique", "slice3d"], "--optical-model", "sabella applies to --technique raycast"),
+    (["--refine", "4"], "--refine", "add --preintegrate"),
+    (["--refine", "0", "--preintegrate"], "argument --refine", "1 or more"),
+    (["--refine", "4", "--preintegrate", "--technique", "slice3d"], "--refine", "raycast only, not slice3d"),
 ]
 
 
@@ -323,6 +326,17 @@ def test_bench_is_wired(capsys, monkeypatch):
     monkeypatch.setitem(sys.modules, "dvr_gl.bench", None)
     code, _, err = _run(["bench"], capsys)
     assert code == 2 and "not available" in err
+
+
+def test_render_refined_pre_integration(renderer, tiny, capsys):
+    """--refine reaches the ray caster: the image is the API's, and the summary says so."""
+    d, volume = tiny
+    out = d / "refined.png"
+    code, stdout, err = _run(["render", d / "tiny.npy", "--size", "24x24", "--out", out, "--preintegrate",
+                              "--refine", "4", "--transparent"], capsys)
+    assert code == 0, err
+    assert "preintegrate, refine 4" in stdout
+    assert _png(out)[1][..., 3].max() > 0
 
 
 def test_render_slicing_options(renderer, tiny, capsys):

@@ -9,6 +9,7 @@ import pytest
 import dvr_gl
 from dvr_gl import data as bundled
 from dvr_gl import metrics, reference
+from dvr_gl import tolerance
 from dvr_gl.phantoms import marschner_lobb, marschner_lobb_tf
 from dvr_gl.tolerance import MAX_STEP, SAFETY, ErrorModel, error_model, measure
 
@@ -106,6 +107,57 @@ def test_a_narrow_tf_feature_is_pre_integrated(renderer):
     renderer.render(scene, tolerance=2e-2, preintegrate=False)      # the caller's say is kept
     plain = renderer.last_choice
     assert not plain.preintegrate and plain.step_voxels * 2.5 < choice.step_voxels
+
+
+def test_each_way_of_sampling_is_timed_and_the_fastest_taken(renderer):
+    """On a narrow spike all three ways apply (plain, pre-integrated, refined); each
+    choice meets the tolerance on the pilot, the one taken was timed and is the fastest
+    of those timed, and it meets the tolerance on the image. The caller's say is kept."""
+    head = bundled.ct_head()
+    lo, hi = head.data_range
+    centre, width = lo + 0.55 * (hi - lo), 0.01 * (hi - lo)
+    tf = dvr_gl.TransferFunction(color=[(lo, 0.9, 0.6, 0.4), (centre, 1.0, 0.95, 0.8), (hi, 0.6, 0.7, 1.0)],
+                                 opacity=[(lo, 0.0), (centre - width / 2, 0.0), (centre, 0.9),
+                                          (centre + width / 2, 0.0), (hi, 0.0)], unit_distance=head.min_spacing)
+    scene = dvr_gl.Scene(head, tf, dvr_gl.default_camera(head, azimuth=30, elevation=15), 48, 40)
+    ways = tolerance.samplings(scene)
+    assert [(w["preintegrate"], w["refine"]) for w in ways] == [(False, 1), (True, 1), (True, tolerance.REFINE_PARTS)]
+    timed = []
+    original = tolerance.fastest
+
+    def spy(choices, frame_seconds):
+        best = original(choices, frame_seconds)
+        timed.extend([best])
+        return best
+    tolerance.fastest = spy
+    try:
+        image = renderer.render(scene, tolerance=5e-3)
+    finally:
+        tolerance.fastest = original
+    choice = renderer.last_choice
+    assert timed == [choice] and choice.frame_seconds is not None
+    assert metrics.rmse(image, reference.exact(scene)) <= 5e-3
+    renderer.render(scene, tolerance=5e-3, preintegrate=True, refine=2)      # the caller's say is kept
+    assert (renderer.last_choice.preintegrate, renderer.last_choice.refine) == (True, 2)
+    assert renderer.last_choice.frame_seconds is None
+    # no TF detail within reach of the data: no refined way
+    smooth = dvr_gl.TransferFunction(color=[(lo - 9 * (hi - lo), 1, 1, 1), (hi + 9 * (hi - lo), 1, 0, 0)],
+                                     opacity=[(lo - 9 * (hi - lo), 0.0), (hi + 9 * (hi - lo), 0.5)])
+    assert len(tolerance.samplings(scene.replace(tf=smooth))) == 2
+
+
+def test_fastest_takes_the_least_frame_time_and_leaves_out_dear_estimates():
+    def c(step, pre=False, refine=1):
+        return tolerance.Choice(tolerance=1e-2, step=step, step_voxels=step, predicted_rmse=1e-3, order=2.0,
+                                pilot_size=(8, 8), pilot_seconds=0.0, preintegrate=pre, refine=refine)
+    seen = []
+
+    def seconds(choice):
+        seen.append(choice.step_voxels)
+        return {1.0: 3.0, 1.5: 1.0, 2.0: 2.0}[choice.step_voxels]
+    best = tolerance.fastest([c(1.0), c(1.5, True), c(2.0, True, 4), c(1 / 64)], seconds)
+    assert best.step_voxels == 1.5 and best.preintegrate and best.frame_seconds == 1.0
+    assert 1 / 64 not in seen        # 64 plain steps per voxel: over 4x the cheapest estimate
 
 
 def test_the_model_measures_each_pilot_step_against_the_richardson_image():
