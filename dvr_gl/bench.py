@@ -194,6 +194,7 @@ def _row(dataset, scene, label, kind, skip, step_vox, step_world, times, err):
         "ms_max": 1e3 * max(times), "frames_ms": [1e3 * t for t in times],
         "rmse": err["rmse"], "max_abs": err["max_abs"], "psnr": err["psnr"],
         "time_vs_vtk": None, "rmse_vs_vtk": None, "chosen_step_voxels": None, "chosen_preintegrate": None,
+        "chosen_refine": None,
     }
 
 
@@ -275,6 +276,7 @@ def run(args, err=None):
                             gl.render(scene, tolerance=max(vtk_rmse, 1e-12))
                             row["chosen_step_voxels"] = gl.last_choice.step_voxels
                             row["chosen_preintegrate"] = gl.last_choice.preintegrate
+                            row["chosen_refine"] = gl.last_choice.refine
                         rows.append(row)
     finally:
         progress.close()
@@ -484,7 +486,8 @@ def format_table(rows):
     for r in rows:
         label = r["renderer"]
         if r.get("chosen_step_voxels") is not None:     # the step the tolerance chose
-            label += f" (step {r['chosen_step_voxels']:.2g}" + (", pre" if r.get("chosen_preintegrate") else "") + ")"
+            label += f" (step {r['chosen_step_voxels']:.2g}" + (", pre" if r.get("chosen_preintegrate") else "") + (
+                f", refine {r['chosen_refine']}" if (r.get("chosen_refine") or 1) > 1 else "") + ")"
         lines.append((r["dataset"], f"{r['step_voxels']:g}", label, _fmt(r["ms_median"], ".1f"),
                       _fmt(r["ms_min"], ".1f"),
                       _fmt(r["rmse"], ".2e"), _fmt(r["max_abs"], ".3f"), _fmt(r["psnr"], ".1f"),
@@ -507,7 +510,7 @@ def format_table(rows):
 
 CSV_FIELDS = ("dataset", "width", "height", "renderer", "kind", "skip_empty", "step_voxels",
               "step_world", "ms_median", "ms_min", "ms_max", "rmse", "max_abs", "psnr",
-              "time_vs_vtk", "rmse_vs_vtk", "chosen_step_voxels", "chosen_preintegrate")
+              "time_vs_vtk", "rmse_vs_vtk", "chosen_step_voxels", "chosen_preintegrate", "chosen_refine")
 
 
 def output_paths(out):
