@@ -26,8 +26,10 @@ pre-integrated segments and, where the TF has detail within reach of the data, r
 pre-integrated segments (``refine=REFINE_PARTS``): a narrow TF feature needs very short
 plain steps but not pre-integrated ones, and refined ones spend their samples only where
 it is crossed. Each way's choice is then rendered at up to ``TIMING_SIDE`` pixels a side
-(median of ``TIMING_REPEATS``) and the fastest is taken: what a refined segment costs
-depends on how many the TF's detail touches, so it is measured rather than assumed.
+(median of ``TIMING_REPEATS``) and the fastest is taken, if it beats the one the step
+estimate (``PREINTEGRATION_COST``) favours by ``TIMING_MARGIN``: what a refined segment
+costs depends on how many the TF's detail touches, so it is measured rather than
+assumed, and a close call stays with the estimate, since small frames time noisily.
 ``SAFETY`` (0.7) covers what a pilot's pixels do not see of the full image. What was chosen
 and predicted is on ``Renderer.last_choice``; the error model is kept per scene, view and
 options, so another tolerance or a repeated frame costs no pilot.
@@ -52,8 +54,9 @@ VERIFY_ROUNDS = 3                        # pilot frames at chosen steps, at most
 # step is dearer by this estimate than 4x the cheapest is not timed
 PREINTEGRATION_COST = 2.5
 REFINE_PARTS = 4                         # parts of a refined pre-integrated segment
-TIMING_SIDE = 128
-TIMING_REPEATS = 3
+TIMING_SIDE = 256
+TIMING_REPEATS = 5
+TIMING_MARGIN = 0.15
 
 
 @dataclass(frozen=True)
@@ -122,11 +125,15 @@ def estimated_cost(choice):
 
 def fastest(choices, frame_seconds):
     """The Choice whose frame is fastest by ``frame_seconds(choice)``; those whose
-    estimated cost is over 4x the lowest are not timed."""
+    estimated cost is over 4x the lowest are not timed, and another than the estimate's
+    cheapest is taken only when it is at least TIMING_MARGIN faster (timings of small
+    frames are noisy: the estimate decides close calls)."""
     cheapest = min(estimated_cost(c) for c in choices)
     timed = [dataclasses.replace(c, frame_seconds=frame_seconds(c)) for c in choices
              if estimated_cost(c) <= 4 * cheapest]
-    return min(timed, key=lambda c: c.frame_seconds)
+    expected = min(timed, key=estimated_cost)
+    best = min(timed, key=lambda c: c.frame_seconds)
+    return best if best.frame_seconds < (1 - TIMING_MARGIN) * expected.frame_seconds else expected
 
 
 def check_tolerance(tolerance):

@@ -158,6 +158,9 @@ def test_fastest_takes_the_least_frame_time_and_leaves_out_dear_estimates():
     best = tolerance.fastest([c(1.0), c(1.5, True), c(2.0, True, 4), c(1 / 64)], seconds)
     assert best.step_voxels == 1.5 and best.preintegrate and best.frame_seconds == 1.0
     assert 1 / 64 not in seen        # 64 plain steps per voxel: over 4x the cheapest estimate
+    # a close call (within TIMING_MARGIN) stays with the estimate's cheapest: plain at 1 voxel
+    close = tolerance.fastest([c(1.0), c(1.5, True)], lambda ch: {1.0: 1.0, 1.5: 0.9}[ch.step_voxels])
+    assert close.step_voxels == 1.0 and not close.preintegrate and close.frame_seconds == 1.0
 
 
 def test_the_model_measures_each_pilot_step_against_the_richardson_image():
