@@ -59,6 +59,9 @@ RENDERERS = (  # (label, kind, skip_empty)
 # with VTK: dvr_gl asked for VTK's RMSE at each of VTK's steps (Renderer.render's
 # tolerance=, skipping on), timed in the same round robin
 TOLERANCE_LABEL = "dvr_gl tolerance=VTK's RMSE"
+# adaptive sampling: pre-integrated segments refined where the TF has detail, skipping on
+ADAPTIVE_LABEL = "dvr_gl refine=4 (pre-int.)"
+ADAPTIVE_OPTIONS = {"preintegrate": True, "refine": 4}
 
 
 # -- data sets -------------------------------------------------------------------------
@@ -232,6 +235,7 @@ def run(args, err=None):
     sets = _load_datasets(names, args.chest, err)
 
     renderers = [r for r in RENDERERS if r[1] != "vtk" or peer is not None]
+    renderers.append((ADAPTIVE_LABEL, "dvr_gl", True))
     if peer is not None:
         renderers.append((TOLERANCE_LABEL, "dvr_gl", True))
     frames = 1 + args.repeats  # one warm-up frame, then the timed ones
@@ -262,6 +266,9 @@ def run(args, err=None):
                         elif label == TOLERANCE_LABEL:
                             calls.append(functools.partial(gl.render, scene, technique="raycast",
                                                            tolerance=max(vtk_rmse, 1e-12)))
+                        elif label == ADAPTIVE_LABEL:
+                            calls.append(functools.partial(gl.render, scene, technique="raycast", step=step,
+                                                           **ADAPTIVE_OPTIONS))
                         else:
                             calls.append(functools.partial(gl.render, scene, technique="raycast",
                                                            step=step, skip_empty=skip))
@@ -558,7 +565,8 @@ def figure_png(rows, info) -> bytes:
     fig = Figure(figsize=(5.5 * len(names), 4.5), constrained_layout=True)
     axes = fig.subplots(1, len(names), squeeze=False)[0]
     styles = {"dvr_gl raycast": ("tab:blue", "o"), "dvr_gl raycast+skip": ("tab:green", "s"),
-              "VTK GPU raycast": ("tab:red", "^"), TOLERANCE_LABEL: ("tab:purple", "D")}
+              "VTK GPU raycast": ("tab:red", "^"), TOLERANCE_LABEL: ("tab:purple", "D"),
+              ADAPTIVE_LABEL: ("tab:orange", "v")}
     for ax, name in zip(axes, names):
         for label in dict.fromkeys(r.get("series", r["renderer"]) for r in rows):
             pts = sorted(((r["ms_median"], r["rmse"], r["step_voxels"]) for r in rows

@@ -180,7 +180,8 @@ def test_bench_quick_smoke(renderer, tmp_path, monkeypatch, capsys):
     table = capsys.readouterr().out
     assert "VTK GPU raycast" in table and "dvr_gl raycast+skip" in table
     rows = json.loads((tmp_path / "b.json").read_text())["rows"]
-    assert {r["renderer"] for r in rows} == {label for label, _, _ in bench.RENDERERS} | {bench.TOLERANCE_LABEL}
+    assert {r["renderer"] for r in rows} == ({label for label, _, _ in bench.RENDERERS}
+                                             | {bench.TOLERANCE_LABEL, bench.ADAPTIVE_LABEL})
     asked = next(r for r in rows if r["renderer"] == bench.TOLERANCE_LABEL)    # VTK's error, asked for
     assert asked["chosen_step_voxels"] > 0 and asked["rmse"] <= next(
         r for r in rows if r["kind"] == "vtk")["rmse"]
