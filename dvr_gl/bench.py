@@ -401,8 +401,8 @@ def equal_error_and_time(rows):
     range). Returns rows of dicts with the two ratios (dvr_gl / VTK; below 1 is better)."""
     out = []
     for v in (r for r in rows if r["kind"] == "vtk"):
-        mine = sorted((r for r in rows if r["dataset"] == v["dataset"] and r["kind"] != "vtk"
-                       and r.get("skip_empty")), key=lambda r: r["rmse"])
+        mine = sorted((r for r in rows if r["dataset"] == v["dataset"] and r["renderer"] == "dvr_gl raycast+skip"),
+                      key=lambda r: r["rmse"])
         if len(mine) < 2:
             continue
         err = np.log([r["rmse"] for r in mine])

@@ -398,3 +398,20 @@ def test_mesh_linear_field_error_falls_with_cell_size(peer):
         image, _ = peer.render_mesh(Scene(mesh, tf, axis_camera(2), 32, 32), repeats=1, warmup=0)
         err = np.abs(image[8:24, 8:24].reshape(-1, 4) - exact).max(axis=0)
         assert np.all(err <= bound), (n, err)
+
+
+def test_equal_error_and_time_reads_the_skipping_ray_caster_only():
+    """The interpolation runs along dvr_gl raycast+skip's steps; other dvr_gl rows (the
+    tolerance points, the adaptive curve) do not bend it."""
+    from dvr_gl import bench
+
+    def row(renderer, kind, step, ms, rmse):
+        return {"dataset": "d", "renderer": renderer, "kind": kind, "skip_empty": kind != "vtk",
+                "step_voxels": step, "ms_median": ms, "rmse": rmse}
+    rows = [row("VTK GPU raycast", "vtk", 1, 100.0, 1e-2),
+            row("dvr_gl raycast+skip", "dvr_gl", 1, 50.0, 2e-2), row("dvr_gl raycast+skip", "dvr_gl", 0.5, 100.0, 5e-3),
+            row(bench.ADAPTIVE_LABEL, "dvr_gl", 1, 500.0, 1e-4), row(bench.TOLERANCE_LABEL, "dvr_gl", 1, 10.0, 1e-2)]
+    (r,) = bench.equal_error_and_time(rows)
+    # log-log halfway in error between the two steps: sqrt(50 * 100) ms
+    assert r["time_ratio_at_equal_error"] == pytest.approx((50.0 * 100.0) ** 0.5 / 100.0)
+    assert r["error_ratio_at_equal_time"] == pytest.approx(0.5)
