@@ -1044,6 +1044,8 @@ class Viewer:
                 self.options[option] = True
             else:
                 self.options.pop(option, None)
+                if option == "preintegrate":      # refinement cuts pre-integrated segments only
+                    self.options.pop("refine", None)
         if self._try(change, f"switch {option} {'on' if on else 'off'}"):
             self.say(f"{option} {'on' if on else 'off'}")
 

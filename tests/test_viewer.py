@@ -488,6 +488,20 @@ def test_step_and_preintegration_keys(open_viewer, renderer, tmp_path):
         assert any("no preintegrate option" in m for m in v.messages)
 
 
+def test_refined_pre_integration_in_the_viewer(open_viewer, renderer, tmp_path):
+    """`dvr-gl view --preintegrate --refine 4` renders refined segments (the headless
+    image of the same arguments); switching pre-integration off drops the refinement."""
+    v = head_viewer(open_viewer, "--preintegrate", "--refine", "4", "--step", "2", "--screenshot",
+                    str(tmp_path / "r.png"))
+    assert v.render_arguments()[3] == {"preintegrate": True, "refine": 4}
+    v.refine()
+    press(v, "s")
+    assert_matches_headless(v, renderer, png(tmp_path / "r.png"))
+    press(v, "p")
+    assert v.render_arguments()[3] == {}
+    assert not any("error" in m.lower() for m in v.messages), v.messages
+
+
 def test_presets_opacity_scale_and_help(open_viewer, capsys):
     v = head_viewer(open_viewer)
     press(v, "h")
