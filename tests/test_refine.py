@@ -164,3 +164,21 @@ def test_refine_option_errors():
         raycast.make_plan(scene, step=5 * VOLUME.min_spacing, preintegrate=True, refine=4)
     with pytest.raises(ValueError, match="refine splits"):
         reference.render(scene, technique="raycast", refine=4)
+
+
+def test_refined_jittered_and_masked_rays_match_the_reference(renderer):
+    """Jittered starts (a short first segment, refined with its own length) and a volume
+    with non-finite cells (segments whose midpoint is masked are skipped whole) take the
+    same decisions in GL and in the reference."""
+    values = VOLUME.values().copy()
+    values[4:7, 5:9, 6:10] = np.nan
+    masked = dvr_gl.Volume(values, spacing=VOLUME.spacing, origin=VOLUME.origin, mask_nonfinite=True)
+    for volume, opts in ((VOLUME, dict(jitter_seed=3)), (masked, {})):
+        scene = _scene(SPIKE, volume=volume)
+        opts = dict(opts, step=1.1, preintegrate=True, refine=4, ert_transmittance=0.0)
+        plan = raycast.make_plan(scene, **opts)
+        gl = renderer.render(scene, **opts)
+        ref = reference.render(scene, technique="raycast", **opts)
+        assert ref[..., 3].max() > 0.05
+        assert metrics.max_abs_error(gl, ref) <= preintegrated_tolerance(plan, plan.max_segments
+                                                                         * raycast.refine_cuts(plan))
