@@ -751,7 +751,7 @@ def exact_segment(tf, s_front, s_back, length) -> np.ndarray:
     return np.array([C[0], C[1], C[2], A])
 
 
-# -------------------------------------------------------------- the length approximation
+# ---------------------------------------------------------------- the length correction
 def length_correction_error(tf, value_range, length, ratios, size=TABLE_SIZE, corrected=True) -> dict:
     """Largest absolute colour error (premultiplied, any channel) of the colour at ``L =
     ratio * L0`` against the exact one, over all pairs of table nodes: the length

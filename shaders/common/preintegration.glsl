@@ -34,8 +34,9 @@ float meanOffset(float x) {
 // interpolated bilinearly here, in full float precision (the texture unit's filter
 // weights are the rasteriser's business), back index first, then front. The opacity
 // 1 - exp(-len D) is exact for every length. The colour per unit opacity is K at the
-// nominal length and moves towards K0 as the segment shortens, by the weight that is
-// exact for a constant extinction and a linear colour (preintegration.length_weight).
+// nominal length; at other lengths it moves along the line from K0 through K (towards
+// K0 as the segment shortens) by the weight that is exact for a constant extinction and
+// a linear colour (preintegration.length_weight).
 vec4 preintegratedSegmentIn(int first_row, float s_front, float s_back, float len, float nominal) {
     if (len <= 0.0) return vec4(0.0);
     float last = float(u_pi_size - 1);
