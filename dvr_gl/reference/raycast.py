@@ -39,11 +39,13 @@ def refine_iso_bisection(sample, ta, tb, iso, steps=ISO_BISECTION_STEPS):
     return 0.5 * (ta + tb)
 
 
-def _refined_segments(plan, s_front, s_back, a, length, midpoints, sample):
+def _refined_segments(plan, s_front, s_back, a, length, midpoints, sample, light=None):
     """Pre-integrated segments with refinement (GLSL: raycast.frag, REFINE): those whose
     reachable values touch the TF's detail are cut at ``plan.refine - 1`` even points and
-    at every cell face they cross, each part sampled and read from the fine table,
-    composited front to back. ``sample(t, rows)`` samples the rows' rays at ``t``."""
+    at every cell face they cross, each part sampled, read from the fine table and lit at
+    its own midpoint, composited front to back; the others are lit whole at theirs.
+    ``sample(t, rows)`` samples the rows' rays at ``t``; ``light`` is the rows'
+    RayLighting, or None."""
     from ..techniques.raycast import REACH_BLOCK, block_of, touches_detail
     volume = plan.scene.volume
     bound = plan.reach[block_of(volume, midpoints, plan.reach.shape, REACH_BLOCK)].astype(np.float64)
@@ -51,10 +53,14 @@ def _refined_segments(plan, s_front, s_back, a, length, midpoints, sample):
     reach = 0.5 * np.maximum(bound * length, np.abs(s_back - s_front))
     split = touches_detail(plan.detail, mid - reach, mid + reach)
     out = plan.preint.segment(s_front, s_back, length)
+    if light is not None:
+        out = light.segments(out, a + 0.5 * length)
     rows = np.flatnonzero(split)
     if rows.size == 0:
         return out
     a_r, len_r = a[rows], length[rows]
+    if light is not None:
+        light = RayLighting(light.terms, light.origins[rows], light.dirs[rows])
     b_r = a_r + len_r
     cuts = [a_r[:, None] + len_r[:, None] * np.arange(1, plan.refine)[None, :] / plan.refine]
     origins, dirs = sample.rays(rows)
@@ -85,6 +91,8 @@ def _refined_segments(plan, s_front, s_back, a, length, midpoints, sample):
         if live.size:
             s_next[live] = sample(t_next[live], rows[live])
         piece = plan.preint_fine.segment(s_prev, s_next, t_next - t_prev)
+        if light is not None:
+            piece = light.segments(piece, 0.5 * (t_prev + t_next))
         acc[:, :3] += (1 - acc[:, 3:4]) * piece[:, :3]
         acc[:, 3] += (1 - acc[:, 3]) * piece[:, 3]
         t_prev, s_prev = t_next, s_next
@@ -181,13 +189,14 @@ def render_plan(plan, lut_exact=False):
             start = rows[~have_front[rows]]
             s_front[start] = sample(a[~have_front[rows]], start)
             s_back = sample(b, rows)
+            light = None if terms is None else RayLighting(terms, o[rows], d[rows])
             if plan.refine > 1:
                 segment = _refined_segments(plan, s_front[rows], s_back, a, length, o[rows] + tm[:, None] * d[rows],
-                                            _RowSampler(sample, o, d, rows))
+                                            _RowSampler(sample, o, d, rows), light)
             else:
                 segment = plan.preint.segment(s_front[rows], s_back, length)
-            if terms is not None:
-                segment = RayLighting(terms, o[rows], d[rows]).segments(segment, tm)
+                if light is not None:
+                    segment = light.segments(segment, tm)
             s_front[rows] = s_back
             have_front[rows] = True
             transmittance = 1 - alpha_acc[rows]  # the over operator on an associated segment

@@ -50,13 +50,14 @@ refine : 1 (default) or an integer from 2 to 64, with ``preintegrate=True``: ada
     feature (a spike a few per cent of the range wide) is then misplaced by a fraction of
     a step, which converges only at first order. Along a segment of length L the field
     stays within ``G L / 2`` of the mean of its ends (G: a bound on the gradient's
-    magnitude over the segment's brick and its neighbours, from the largest sample
-    differences of each cell, made once per volume), so when that reachable interval
-    holds no knot at which the TF's opacity bends (with opacity on one side), the TF is
-    one line over everything the segment can see. Otherwise the segment is split into
-    ``refine`` parts, each sampled and read from a second table made for their length:
-    the extra samples go only where a narrow feature may be crossed (tested: the same
-    image as a uniform step ``step / refine`` wherever refinement happens).
+    magnitude over the segment's block of REACH_BLOCK cells and its neighbours, from the
+    largest sample differences of each cell, made once per volume), so when that
+    reachable interval holds no knot at which the TF's opacity bends (with opacity on one
+    side), the TF is one line over everything the segment can see. Otherwise the segment
+    is cut into ``refine`` even parts and at every cell face it crosses (between two cuts
+    the field is one smooth cubic, so the straight line errs at second order), each part
+    sampled, read from a second table made for its length and lit at its own midpoint:
+    the extra samples go only where a narrow feature may be crossed.
 step_table : True (default): a full-length segment (all but a ray's first and last) reads
     its premultiplied, opacity-corrected segment from a table made once per TF and step
     (``LookupTable.step_table``) instead of correcting each sample's opacity (a log and an

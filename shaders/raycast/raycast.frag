@@ -288,6 +288,7 @@ void main() {
                 float t_next = min(min(t_even, min(t_face.x, min(t_face.y, t_face.z))), b);
                 float s_next = t_next < b ? sampleVolume(origin + t_next * dir) : s_back;
                 vec4 piece = preintegratedSegmentIn(2 * u_pi_size, s_prev, s_next, t_next - t_prev, u_pi_fine_length);
+                piece = litSegment(piece, origin + (0.5 * (t_prev + t_next)) * dir, dir);   // each part at its midpoint
                 segment.rgb += (1.0 - segment.a) * piece.rgb;
                 segment.a += (1.0 - segment.a) * piece.a;
                 if (t_even <= t_next) even += 1;
@@ -296,12 +297,11 @@ void main() {
                 s_prev = s_next;
             }
         } else {
-            segment = preintegratedSegment(s_front, s_back, len);
+            segment = litSegment(preintegratedSegment(s_front, s_back, len), p, dir);
         }
   #else
-        vec4 segment = preintegratedSegment(s_front, s_back, len);
+        vec4 segment = litSegment(preintegratedSegment(s_front, s_back, len), p, dir);
   #endif
-        segment = litSegment(segment, p, dir);
         s_front = s_back;
         have_front = true;
   #if SKIP_EMPTY
