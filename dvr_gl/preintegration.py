@@ -41,9 +41,11 @@ The table's values
 ------------------
 The nodes span the values with opacity (:func:`opacity_support`): where the TF is
 transparent below or above some knot, nodes there would only ever read zero. A segment
-reaching beyond the nodes is empty there; its part within goes from the edge to its
+reaching beyond such a cut end is empty there; its part within goes from the edge to its
 other end (the field is linear along it) over its share of the length, which the length
-correction takes (``PreintegrationTable.segment``, GLSL ``preintegratedSegmentIn``). A
+correction takes (``PreintegrationTable.segment``, GLSL ``preintegratedSegmentIn``). At
+an end that is not cut (the TF has opacity there: it is the data's extreme or a knot),
+a value rounded beyond it reads the end's entry. A
 spike 1 % of the data range wide thus gets all the nodes instead of 5 of 512. A TF that
 reaches opacity 1 keeps nodes over the whole data range (its opaque entries do not follow
 the correction).
@@ -268,9 +270,12 @@ class PreintegrationTable:
     for opaque segments; ``table64`` holds the same in float64 before rounding.
     Nodes: ``s_i = lo + i (hi - lo) / (size - 1)``; ``scale = (size - 1) / (hi - lo)``."""
 
-    def __init__(self, lo, hi, size, length, table64, tf=None, colour0_64=None):
+    def __init__(self, lo, hi, size, length, table64, tf=None, colour0_64=None, cut=(False, False)):
         self.lo = float(lo)
         self.hi = float(hi)
+        # (below lo, above hi): the table stops where the TF turns transparent for good on
+        # that side (values beyond are empty); else values beyond take the end's value
+        self.cut = (bool(cut[0]), bool(cut[1]))
         self.size = int(size)
         self.length = float(length)
         self.scale = (self.size - 1) / (self.hi - self.lo)
@@ -320,10 +325,15 @@ class PreintegrationTable:
 
     def inside_fraction(self, s_front, s_back):
         """The fraction of a segment (the field linear along it) within the table's values
-        (GLSL: the same in node units; 1 where no end is beyond them)."""
+        where the table is cut (GLSL: the same in node units; 1 where no end is beyond a
+        cut side; an end beyond an uncut side counts as the end's value)."""
         last = self.size - 1
         uf = (np.asarray(s_front, np.float64) - self.lo) * self.scale
         ub = (np.asarray(s_back, np.float64) - self.lo) * self.scale
+        if not self.cut[0]:
+            uf, ub = np.maximum(uf, 0.0), np.maximum(ub, 0.0)
+        if not self.cut[1]:
+            uf, ub = np.minimum(uf, last), np.minimum(ub, last)
         cf, cb = np.clip(uf, 0, last), np.clip(ub, 0, last)
         with np.errstate(divide="ignore", invalid="ignore"):
             part = np.clip(np.abs(cb - cf) / np.abs(ub - uf), 0.0, 1.0)
@@ -368,7 +378,8 @@ class PreintegrationTable:
 
     def uniforms(self):
         """The shader's uniforms for this table (the sampler ``t_preint`` aside)."""
-        return {"u_pi_lo": self.lo, "u_pi_scale": self.scale, "u_pi_size": self.size, "u_pi_length": self.length}
+        return {"u_pi_lo": self.lo, "u_pi_scale": self.scale, "u_pi_size": self.size, "u_pi_length": self.length,
+                "u_pi_cut": tuple(float(c) for c in self.cut)}
 
     def __repr__(self):
         return (f"PreintegrationTable(size={self.size}, lo={self.lo}, hi={self.hi}, "
@@ -481,7 +492,9 @@ def build_table(tf, value_range, length, size=TABLE_SIZE, zero=None) -> Preinteg
     N = _table_size(size)
     lo = min(lo, float(tf.knots[0]))
     hi = max(hi, float(tf.knots[-1]))
+    full = (lo, hi)
     lo, hi = opacity_support(tf, lo, hi)
+    cut = (lo > full[0], hi < full[1])
     if hi <= lo:  # one value only: any width will do, the function is constant near it
         lo, hi = lo - 0.5, lo + 0.5
     nodes = np.linspace(lo, hi, N)
@@ -615,13 +628,13 @@ def build_table(tf, value_range, length, size=TABLE_SIZE, zero=None) -> Preinteg
     table[..., :3] = K
     table[..., 3] = np.where(np.isfinite(D), D, OPAQUE_SENTINEL)
     if zero is False:               # this is the zero-length table itself
-        return PreintegrationTable(lo, hi, N, L, table, tf)
+        return PreintegrationTable(lo, hi, N, L, table, tf, cut=cut)
     if zero is None:
         zero = build_table(tf, value_range, ZERO_LENGTH * L, size, zero=False)
     elif (zero.lo, zero.hi, zero.size) != (lo, hi, N):
         raise ValueError(f"zero must be a table of the same nodes ({lo}, {hi}, {N}), got "
                          f"({zero.lo}, {zero.hi}, {zero.size})")
-    return PreintegrationTable(lo, hi, N, L, table, tf, colour0_64=zero.table64[..., :3])
+    return PreintegrationTable(lo, hi, N, L, table, tf, colour0_64=zero.table64[..., :3], cut=cut)
 
 
 def _fill_transparent(K, A, node_colors):

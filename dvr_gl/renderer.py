@@ -222,7 +222,8 @@ class Renderer:
                     return tol.median_seconds(lambda: self.render(timed, technique, step=chosen.step,
                                                                   **dict(options, **chosen.sampling)))
                 return tol.fastest([choice(way) for way in ways], frame_seconds)
-            self.last_choice = self._tolerance_picks.get(pilot_key + (tolerance,), pick)
+            # timed at the request's own size (up to TIMING_SIDE): kept per size
+            self.last_choice = self._tolerance_picks.get(pilot_key + (tolerance, scene.width, scene.height), pick)
         return self.last_choice.step, dict(self.last_choice.sampling)
 
     @property

@@ -202,6 +202,22 @@ def test_segments_reaching_beyond_the_values_with_opacity():
     np.testing.assert_array_equal(table.segment(0.6, 0.9, L), 0.0)
 
 
+def test_values_beyond_an_uncut_end_take_the_end_value():
+    """A TF with opacity at its ends keeps the table over the data and knots, not cut:
+    values rounded just past an end (a plateau at the data's maximum) read the end's
+    entry, as before; a cut end (the spike's) makes them empty."""
+    edge = TF(color=[(0.0, 1, 0, 0), (1.0, 0, 0, 1)], opacity=[(0.0, 0.3), (1.0, 0.5)], unit_distance=0.01)
+    table = build_table(edge, (0.0, 1.0), 0.01, 64)
+    assert table.cut == (False, False)
+    for end in (0.0, 1.0):
+        beyond = np.nextafter(end, -1.0 if end == 0.0 else 2.0)
+        np.testing.assert_array_equal(table.segment(beyond, beyond, 0.01), table.segment(end, end, 0.01))
+        assert table.segment(end, end, 0.01)[3] > 0
+    spike = build_table(SPIKE, VALUE_RANGE, 0.01, 64)
+    assert spike.cut == (True, True)
+    np.testing.assert_array_equal(spike.segment(np.nextafter(spike.lo, 0.0), np.nextafter(spike.lo, 0.0), 0.01), 0.0)
+
+
 def test_length_correction_errs_far_less_than_the_nominal_colour():
     """``K0 + (K(L0) - K0) w`` against the exact colour at other lengths (tables made for
     those lengths, exact at the nodes), over all pairs of nodes: the uncorrected K(L0)

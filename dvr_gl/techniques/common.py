@@ -138,7 +138,7 @@ def preintegration_table(scene, step, tables):
 
 def preintegration_uniforms(table):
     """Uniforms of shaders/common/preintegration.glsl."""
-    return {"u_pi_lo": table.lo, "u_pi_scale": table.scale, "u_pi_size": table.size, "u_pi_length": table.length}
+    return table.uniforms()
 
 
 def point_shading_defines(scene):

@@ -50,7 +50,8 @@ refine : 1 (default) or an integer from 2 to 64, with ``preintegrate=True``: ada
     feature (a spike a few per cent of the range wide) is then misplaced by a fraction of
     a step, which converges only at first order. Along a segment of length L the field
     stays within ``G L / 2`` of the mean of its ends (G: a bound on the gradient's
-    magnitude over the segment's block of REACH_BLOCK cells and its neighbours, from the
+    magnitude over the segment's block of REACH_BLOCK cells and the blocks half a step
+    around it, from the
     largest sample differences of each cell, made once per volume), so when that
     reachable interval holds no knot at which the TF's opacity bends (with opacity on one
     side), the TF is one line over everything the segment can see. Otherwise the segment
@@ -155,10 +156,6 @@ def make_plan(scene, step=None, *, target="rgba32f", jitter_seed=None, ert_trans
         raise ValueError(f"refine must be from 1 to {MAX_REFINE}, got {refine!r}")
     if refine > 1 and not preintegrate:
         raise ValueError(f"refine splits pre-integrated segments; give preintegrate=True (got refine={refine})")
-    if refine > 1 and step > 2 * REACH_BLOCK * scene.volume.min_spacing:
-        raise ValueError(f"refine bounds the field over blocks of {REACH_BLOCK} cells and their neighbours: "
-                         f"step must be at most {2 * REACH_BLOCK} voxels "
-                         f"({2 * REACH_BLOCK * scene.volume.min_spacing:g}), got {step!r}")
     composite = scene.mode == "composite"
     sabella = scene.optical_model == "sabella"   # the peak is over every sample: no skipping, no early end
     lut = tables.get("lut", scene.tf, make=LookupTable)
@@ -172,7 +169,9 @@ def make_plan(scene, step=None, *, target="rgba32f", jitter_seed=None, ert_trans
             fine = preintegration_table(scene, step / refine, tables)
             detail = tables.get("tf_detail", scene.tf, make=detail_intervals)
         if refine > 1:
-            reach = tables.get("gradient_bounds", scene.volume, make=gradient_bounds)
+            # blocks around the midpoint's that half a segment can reach, along any axis
+            radius = max(1, math.ceil(0.5 * step / (REACH_BLOCK * scene.volume.min_spacing)))
+            reach = tables.get(f"gradient_bounds:{radius}", scene.volume, make=lambda v: gradient_bounds(v, radius))
         if skip_empty:
             ranges = tables.get("brick_ranges", scene.volume, make=brick_value_ranges)
             bricks = tables.get("preint_occupancy", scene.volume, scene.tf, preint,
@@ -256,9 +255,11 @@ def brick_value_ranges(volume):
     return lo.astype(np.float64), hi.astype(np.float64)
 
 
-def gradient_bounds(volume):
+def gradient_bounds(volume, radius=1):
     """Per block of REACH_BLOCK cells (bz, by, bx), float32: a bound on the magnitude of
-    the trilinear field's gradient over the block and its 26 neighbours. In a cell each
+    the trilinear field's gradient over the block and the blocks within ``radius`` of it
+    along each axis (26 neighbours for 1; a segment whose midpoint is in the block and
+    whose half length is at most ``radius`` blocks' smallest side stays among them). In a cell each
     partial derivative is a convex combination of the differences along that axis's four
     edges, so the cell's ``sqrt(sum over axes of (largest edge difference / spacing)^2)``
     bounds it (rounded up to float32). Once per volume (non-finite samples count as 0;
@@ -281,7 +282,7 @@ def gradient_bounds(volume):
     padded = np.zeros([b * REACH_BLOCK for b in nb])
     padded[:cells.shape[0], :cells.shape[1], :cells.shape[2]] = cells
     per_block = padded.reshape(nb[0], REACH_BLOCK, nb[1], REACH_BLOCK, nb[2], REACH_BLOCK).max(axis=(1, 3, 5))
-    bound = maximum_filter(per_block, size=3, mode="nearest") * (1 + 2.0 ** -20)
+    bound = maximum_filter(per_block, size=2 * int(radius) + 1, mode="nearest") * (1 + 2.0 ** -20)
     return bound.astype(np.float32)
 
 

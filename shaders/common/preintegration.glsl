@@ -16,6 +16,8 @@ uniform float u_pi_lo;        // data value of node 0
 uniform float u_pi_scale;     // nodes per data unit
 uniform int u_pi_size;
 uniform float u_pi_length;    // the nominal length of the table in rows 0 .. 2 size - 1
+uniform vec2 u_pi_cut;        // 1 where the table stops at the TF's last opacity on that side
+                              // (below node 0, above the last): values beyond are empty
 
 // g(x) = 1/x - 1/(e^x - 1) - 1/2: the mean position in [0, 1] under the density e^(-x t),
 // less 1/2 (series below 0.5; -1/2 as x grows without bound)
@@ -42,10 +44,19 @@ vec4 preintegratedSegmentIn(int first_row, float s_front, float s_back, float le
     float last = float(u_pi_size - 1);
     float uf_raw = (s_front - u_pi_lo) * u_pi_scale;
     float ub_raw = (s_back - u_pi_lo) * u_pi_scale;
+    // beyond an end the table was not cut at, a value counts as the end's value
+    if (u_pi_cut.x < 0.5) {
+        uf_raw = max(uf_raw, 0.0);
+        ub_raw = max(ub_raw, 0.0);
+    }
+    if (u_pi_cut.y < 0.5) {
+        uf_raw = min(uf_raw, last);
+        ub_raw = min(ub_raw, last);
+    }
     float uf = clamp(uf_raw, 0.0, last);
     float ub = clamp(ub_raw, 0.0, last);
-    // the table holds every value with opacity: a segment reaching beyond it is empty
-    // there, and counts with the length of its part within (the field linear along it)
+    // beyond a cut end the values are empty: a segment reaching there counts with the
+    // length of its part within (the field linear along it)
     if (uf != uf_raw || ub != ub_raw) {
         float span = abs(ub_raw - uf_raw);
         len *= span > 0.0 ? clamp(abs(ub - uf) / span, 0.0, 1.0) : 0.0;
