@@ -281,7 +281,9 @@ class Renderer:
             return value
         return cache.get(_Key(kind, *objects), logged)
 
-    def _texture3d(self, kind, array, components, dtype, linear):
+    def texture3d(self, kind, array, components, dtype, linear):
+        """A 3-D texture of ``array`` (nz, ny, nx[, components]), clamped at the edges,
+        linear or nearest filtered; logged in ``created``."""
         nz, ny, nx = array.shape[:3]
         tex = self.ctx.texture3d((nx, ny, nz), components, np.ascontiguousarray(array).tobytes(), dtype=dtype)
         f = self.ctx.LINEAR if linear else self.ctx.NEAREST
@@ -292,15 +294,15 @@ class Renderer:
 
     def volume_texture(self, volume):
         """The samples as float32 in data units: exact for 8- and 16-bit integers."""
-        return self._volumes.get(_Key(volume), lambda: self._texture3d(
+        return self._volumes.get(_Key(volume), lambda: self.texture3d(
             "volume", volume.values(np.float32), 1, "f4", linear=True))
 
     def cell_valid_texture(self, volume):
-        return self._masks.get(_Key(volume), lambda: self._texture3d(
+        return self._masks.get(_Key(volume), lambda: self.texture3d(
             "cell_valid", volume.cell_valid.astype(np.uint8) * 255, 1, "f1", linear=False))
 
     def occupancy_texture(self, volume, tf, occupancy):
-        return self._occupancy.get(_Key(volume, tf), lambda: self._texture3d(
+        return self._occupancy.get(_Key(volume, tf), lambda: self.texture3d(
             "occupancy", occupancy.astype(np.uint8) * 255, 1, "f1", linear=False))
 
     def tf_texture(self, lut):

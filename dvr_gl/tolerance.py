@@ -102,7 +102,12 @@ def samplings(scene):
 
 def timing_scene(scene):
     """The view timed to compare the ways of sampling: at most TIMING_SIDE pixels a side."""
-    scale = min(1.0, TIMING_SIDE / max(scene.width, scene.height))
+    return scaled_scene(scene, TIMING_SIDE)
+
+
+def scaled_scene(scene, side):
+    """The same view at no more than ``side`` pixels on its longer side (8 at least)."""
+    scale = min(1.0, side / max(scene.width, scene.height))
     return scene.replace(width=max(8, round(scene.width * scale)), height=max(8, round(scene.height * scale)))
 
 
@@ -146,8 +151,7 @@ def check_tolerance(tolerance):
 
 def pilot_scene(scene):
     """The same view at no more than PILOT_SIDE pixels on its longer side."""
-    scale = min(1.0, PILOT_SIDE / max(scene.width, scene.height))
-    return scene.replace(width=max(8, round(scene.width * scale)), height=max(8, round(scene.height * scale)))
+    return scaled_scene(scene, PILOT_SIDE)
 
 
 def rmse(a, b):

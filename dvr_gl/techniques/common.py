@@ -136,11 +136,6 @@ def preintegration_table(scene, step, tables):
                       make=lambda v, t, length: build_table(t, v.data_range, length, zero=zero))
 
 
-def preintegration_uniforms(table):
-    """Uniforms of shaders/common/preintegration.glsl."""
-    return table.uniforms()
-
-
 def point_shading_defines(scene):
     """The lighting defines of the point primitives (particles, splats), whose gradients
     come with each point: SHADING, and LIGHTS beyond the default headlight."""
@@ -218,7 +213,7 @@ def add_optional_inputs(renderer, plan, textures, uniforms):
     scene = plan.scene
     if getattr(plan, "preint", None) is not None:
         textures["t_preint"] = renderer.preintegration_texture(plan.preint)
-        uniforms.update(preintegration_uniforms(plan.preint))
+        uniforms.update(plan.preint.uniforms())
     if scene.volume.has_nonfinite:
         textures["t_cell_valid"] = renderer.cell_valid_texture(scene.volume)
     if scene.shaded or scene.illustration or scene.tf_2d is not None:

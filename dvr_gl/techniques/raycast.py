@@ -421,10 +421,10 @@ def draw(renderer, plan):
         uniforms["u_brick"] = float(BRICK)
     add_optional_inputs(renderer, plan, textures, uniforms)
     if plan.bricks is not None:
-        textures["t_bricks"] = renderer.resource("preint_occupancy", plan.bricks, make=lambda: renderer._texture3d(
+        textures["t_occupancy"] = renderer.resource("preint_occupancy", plan.bricks, make=lambda: renderer.texture3d(
             "preint_occupancy", plan.bricks, 1, "f4", linear=False))
     if plan.reach is not None:
-        textures["t_reach"] = renderer.resource("gradient_bounds", plan.reach, make=lambda: renderer._texture3d(
+        textures["t_reach"] = renderer.resource("gradient_bounds", plan.reach, make=lambda: renderer.texture3d(
             "gradient_bounds", plan.reach, 1, "f4", linear=False))
         uniforms["u_reach_block"] = float(REACH_BLOCK)
     if plan.refine > 1:

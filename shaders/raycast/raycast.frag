@@ -73,13 +73,9 @@ uniform int u_max_segments;   // upper bound on segments per ray (a safety net)
 #if JITTER
 uniform sampler2D t_jitter;   // offsets in [0, 1) of a step, tiled over the image
 #endif
-#if SKIP_EMPTY && !PREINTEGRATE
+#if SKIP_EMPTY
 uniform sampler3D t_occupancy; // per brick: 1 if any value in it has non-zero opacity
-uniform float u_brick;         // brick size in samples
-#endif
-#if PREINTEGRATE && SKIP_EMPTY
-uniform sampler3D t_bricks;    // R32F per brick: 1 if some value within a table cell of
-                               // its range has non-zero opacity
+                               // (pre-integrated: any value within a table cell of its range)
 uniform float u_brick;         // brick size in samples
 #endif
 #if REFINE
@@ -110,18 +106,28 @@ uniform float u_iso;
 
 out vec4 f_color;
 
+#if SKIP_EMPTY
+// Whether the brick holding p is empty, and if so where the ray leaves it.
+bool emptyBrickExit(vec3 p, vec3 origin, vec3 dir, out float t_exit) {
+    ivec3 brick = clamp(ivec3(floor(p / u_spacing / u_brick)), ivec3(0), textureSize(t_occupancy, 0) - 1);
+    t_exit = 0.0;
+    if (texelFetch(t_occupancy, brick, 0).r >= 0.5) return false;
+    vec3 lo = vec3(brick) * u_brick * u_spacing;
+    vec3 hi = lo + u_brick * u_spacing;
+    vec3 t_far = max((lo - origin) / dir, (hi - origin) / dir);
+    t_exit = min(min(t_far.x, t_far.y), t_far.z);
+    return true;
+}
+#endif
+
 #if SKIP_EMPTY && PREINTEGRATE
 // A pre-integrated segment k (midpoint p) came out fully transparent: if its brick is
 // empty, every later segment with both ends in the brick is exactly zero (its ends'
 // values, and the table nodes around them, have zero opacity); return the last of them
 // (k if none): the one after it starts afresh with its own front sample.
 int lastSegmentInEmptyBrick(vec3 p, vec3 origin, vec3 dir, float t0, float jitter, int k) {
-    ivec3 brick = clamp(ivec3(floor(p / u_spacing / u_brick)), ivec3(0), textureSize(t_bricks, 0) - 1);
-    if (texelFetch(t_bricks, brick, 0).r >= 0.5) return k;
-    vec3 lo = vec3(brick) * u_brick * u_spacing;
-    vec3 hi = lo + u_brick * u_spacing;
-    vec3 t_far = max((lo - origin) / dir, (hi - origin) / dir);
-    float t_exit = min(min(t_far.x, t_far.y), t_far.z);
+    float t_exit;
+    if (!emptyBrickExit(p, origin, dir, t_exit)) return k;
     return max(k, int(floor((t_exit - t0) / u_step - jitter)) - 1);
 }
 #elif SKIP_EMPTY
@@ -130,13 +136,8 @@ int lastSegmentInEmptyBrick(vec3 p, vec3 origin, vec3 dir, float t0, float jitte
 // midpoint first passes the brick's exit (rounding can only make the ray look once more,
 // never skip a sample); else k.
 int skipEmptyBrick(vec3 p, vec3 origin, vec3 dir, float t0, float jitter, int k) {
-    vec3 idx = p / u_spacing;
-    ivec3 brick = clamp(ivec3(floor(idx / u_brick)), ivec3(0), textureSize(t_occupancy, 0) - 1);
-    if (texelFetch(t_occupancy, brick, 0).r >= 0.5) return k;
-    vec3 lo = vec3(brick) * u_brick * u_spacing;
-    vec3 hi = lo + u_brick * u_spacing;
-    vec3 t_far = max((lo - origin) / dir, (hi - origin) / dir);
-    float t_exit = min(min(t_far.x, t_far.y), t_far.z);
+    float t_exit;
+    if (!emptyBrickExit(p, origin, dir, t_exit)) return k;
     int k_next = int(ceil((t_exit - t0) / u_step - jitter - 0.5)) - 1;
     return max(k, k_next - 1);
 }
