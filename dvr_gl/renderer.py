@@ -329,13 +329,18 @@ class Renderer:
             return tex
         return self._stacks.get(_Key(volume, axis), make)
 
-    def preintegration_texture(self, table):
+    def preintegration_texture(self, table, fine=None):
+        """The table's texture (``PreintegrationTable.texture_rows``); with ``fine`` (the
+        refined parts' table, raycast), that one's rows follow below
+        (``preintegratedSegmentIn``)."""
         def make():
-            tex = self.ctx.texture((table.size, 2 * table.size), 4, table.texture_bytes(), dtype="f4")
+            rows = [table.texture_rows()] + ([] if fine is None else [fine.texture_rows()])
+            data = np.ascontiguousarray(np.concatenate(rows))
+            tex = self.ctx.texture((table.size, data.shape[0]), 4, data.tobytes(), dtype="f4")
             tex.filter = (self.ctx.NEAREST, self.ctx.NEAREST)
             self.created.append(("preintegration", (table.size, table.size)))
             return tex
-        return self._preint.get(_Key(table), make)
+        return self._preint.get(_Key(table, fine), make)
 
     def small_texture(self, kind, table):
         """A 2-D float32 table (jitter offsets), re-uploaded only when its values change."""

@@ -186,7 +186,7 @@ class ErrorModel:
         points = sorted(zip(self.steps + (step,), self.errors + (error,)), reverse=True)
         return ErrorModel(order=self.order, steps=tuple(p[0] for p in points), errors=tuple(p[1] for p in points),
                           pilot_size=self.pilot_size, pilot_seconds=self.pilot_seconds + seconds,
-                          reference=self.reference)
+                          reference=self.reference, choices=dict(self.choices))
 
     def _curve(self):
         """(log steps, log errors) ascending in step, errors made non-decreasing with the

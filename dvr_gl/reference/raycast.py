@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .common import (box_rays, cell_is_valid, classified_segment, classifier, sabella_color, trilinear,
+from .common import (blend_under, box_rays, cell_is_valid, classified_segment, classifier, sabella_color, trilinear,
                      world_to_index)
 from .shading import (RayLighting, depth_range, gradient, gradient_epsilon, sample_terms, scene_lights,
                       shade_blinn_phong)
@@ -93,8 +93,7 @@ def _refined_segments(plan, s_front, s_back, a, length, midpoints, sample, light
         piece = plan.preint_fine.segment(s_prev, s_next, t_next - t_prev)
         if light is not None:
             piece = light.segments(piece, 0.5 * (t_prev + t_next))
-        acc[:, :3] += (1 - acc[:, 3:4]) * piece[:, :3]
-        acc[:, 3] += (1 - acc[:, 3]) * piece[:, 3]
+        acc = blend_under(acc, piece)
         t_prev, s_prev = t_next, s_next
         if not inner.any():
             break

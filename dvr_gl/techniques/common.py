@@ -212,7 +212,7 @@ def add_optional_inputs(renderer, plan, textures, uniforms):
     masked-cell texture and the lighting."""
     scene = plan.scene
     if getattr(plan, "preint", None) is not None:
-        textures["t_preint"] = renderer.preintegration_texture(plan.preint)
+        textures["t_preint"] = renderer.preintegration_texture(plan.preint, getattr(plan, "preint_fine", None))
         uniforms.update(plan.preint.uniforms())
     if scene.volume.has_nonfinite:
         textures["t_cell_valid"] = renderer.cell_valid_texture(scene.volume)

@@ -168,7 +168,6 @@ def make_plan(scene, step=None, *, target="rgba32f", jitter_seed=None, ert_trans
         if refine > 1:
             fine = preintegration_table(scene, step / refine, tables)
             detail = tables.get("tf_detail", scene.tf, make=detail_intervals)
-        if refine > 1:
             # blocks around the midpoint's that half a segment can reach, along any axis
             radius = max(1, math.ceil(0.5 * step / (REACH_BLOCK * scene.volume.min_spacing)))
             reach = tables.get(f"gradient_bounds:{radius}", scene.volume, make=lambda v: gradient_bounds(v, radius))
@@ -415,8 +414,7 @@ def draw(renderer, plan):
         textures["t_step_tf"] = renderer.resource("step_tf", plan.step_rows, make=lambda: _table_texture(
             renderer.ctx, plan.step_rows))
     uniforms = {**camera_uniforms(scene), **volume_uniforms(volume), **tf_uniforms(plan.lut, scene.tf),
-                "u_step": plan.step, "u_max_segments": plan.max_segments,
-                "u_max_iterations": plan.max_segments * (plan.refine + 2)}
+                "u_step": plan.step, "u_max_segments": plan.max_segments}
     if plan.occupancy is not None or plan.bricks is not None:
         uniforms["u_brick"] = float(BRICK)
     add_optional_inputs(renderer, plan, textures, uniforms)
@@ -428,8 +426,6 @@ def draw(renderer, plan):
             "gradient_bounds", plan.reach, 1, "f4", linear=False))
         uniforms["u_reach_block"] = float(REACH_BLOCK)
     if plan.refine > 1:
-        textures["t_preint"] = renderer.resource("preint_stacked", plan.preint, plan.preint_fine, make=lambda: (
-            _stacked_tables(ctx, plan.preint, plan.preint_fine)))
         detail = np.zeros((MAX_DETAIL, 2), np.float32)
         detail[:len(plan.detail)] = plan.detail
         uniforms.update({"u_detail_count": len(plan.detail), "u_refine": plan.refine,
@@ -459,15 +455,6 @@ def draw(renderer, plan):
     vao.render()
     ctx.disable(ctx.CULL_FACE)
     return fbo
-
-
-def _stacked_tables(ctx, coarse, fine):
-    """The nominal-length table in rows 0 .. size - 1 and the refined parts' table
-    below it (``preintegratedSegmentIn``)."""
-    data = np.concatenate([coarse.texture_rows(), fine.texture_rows()])
-    tex = ctx.texture((coarse.size, 4 * coarse.size), 4, np.ascontiguousarray(data).tobytes(), dtype="f4")
-    tex.filter = (ctx.NEAREST, ctx.NEAREST)
-    return tex
 
 
 def _table_texture(ctx, rows):

@@ -126,6 +126,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -216,6 +217,13 @@ class TentSamples:
     def count(self):
         return len(self.values)
 
+    @cached_property
+    def slots(self):
+        """(nz, ny, nx) int64: each volume sample's row here, -1 where it is not splatted."""
+        slot = np.full(self.mask.shape, -1, np.int64)
+        slot[self.mask] = np.arange(self.count)
+        return slot
+
 
 @dataclass
 class Runs:
@@ -246,9 +254,6 @@ class SheetOrder:
     runs: Runs | None
     order: np.ndarray
     ranges: np.ndarray
-
-    def depths(self):
-        return self.far_depth - np.arange(self.count) * self.spacing
 
 
 @dataclass
@@ -394,9 +399,7 @@ def run_axis(samples, volume, forward):
 
 def runs_along(samples, axis):
     """The samples' ``Runs`` along ``axis``."""
-    slot = np.full(samples.mask.shape, -1, np.int64)
-    slot[samples.mask] = np.arange(samples.count)
-    moved = np.moveaxis(slot, 2 - axis, -1)                     # the run axis fastest
+    moved = np.moveaxis(samples.slots, 2 - axis, -1)                     # the run axis fastest
     flat = np.flatnonzero(moved.ravel() >= 0)
     ids = moved.ravel()[flat]
     n = moved.shape[-1]
@@ -530,11 +533,6 @@ def run_quads(table, forward, axis, u, v, spacing, lengths, delta0):
     return np.where((lo <= hi)[..., None], out, np.nan)
 
 
-def pixel_size(scene):
-    """World units per pixel: at unit depth (perspective) or anywhere (orthographic)."""
-    return 2.0 * scene.camera.screen_scale(scene.width, scene.height)[1] / scene.height
-
-
 class _TentTextures:
     """A set of tent samples on the GPU in runs along one axis, uploaded once: the runs,
     and per sample in run order its value and non-finite flag, and (lit) its gradient;
@@ -564,11 +562,8 @@ class _TentTextures:
 
 
 def _rows_texture(ctx, array, dtype):
-    from .tetra import TEXEL_ROW_WIDTH, texture_rows
-    rows = texture_rows(np.ascontiguousarray(array, np.int32 if dtype == "i4" else np.float32))
-    tex = ctx.texture((TEXEL_ROW_WIDTH, rows.shape[0]), rows.shape[2], rows.tobytes(), dtype=dtype)
-    tex.filter = (ctx.NEAREST, ctx.NEAREST)
-    return tex
+    from .tetra import _texture
+    return _texture(ctx, np.asarray(array, np.int32 if dtype == "i4" else np.float32), dtype)
 
 
 def _draw_tent(renderer, plan):
@@ -600,7 +595,7 @@ def _draw_tent(renderer, plan):
     bind(splat, splat_textures, {**camera_uniforms(scene), **slabs, "u_spacing": tuple(scene.volume.spacing),
                                  "u_axis": runs.axis, "u_u": tuple(u), "u_v": tuple(v),
                                  "u_section_depth": tuple(depths), "u_section_rect": [tuple(r) for r in rects],
-                                 "u_margin": QUAD_MARGIN * pixel_size(scene)})
+                                 "u_margin": QUAD_MARGIN / pixels_per_unit(scene)})
     splat["u_view_proj"].write(view_proj)
     sheet_textures = {"t_tf": renderer.tf_texture(plan.lut), "t_sheet": buffers.color_attachments[0]}
     if lit:

@@ -208,8 +208,8 @@ def cell_fields(mesh):
     out[:, 0, :3] = grad
     out[:, 0, 3] = s.mean(axis=1)
     out[:, 1, :3] = p.mean(axis=1)
-    out[:, 2, 0] = s.min(axis=1)
-    out[:, 2, 1] = s.max(axis=1)
+    out[:, 2, 0] = topo.cell_min
+    out[:, 2, 1] = topo.cell_max
     return out
 
 

@@ -290,8 +290,7 @@ void main() {
                 float s_next = t_next < b ? sampleVolume(origin + t_next * dir) : s_back;
                 vec4 piece = preintegratedSegmentIn(2 * u_pi_size, s_prev, s_next, t_next - t_prev, u_pi_fine_length);
                 piece = litSegment(piece, origin + (0.5 * (t_prev + t_next)) * dir, dir);   // each part at its midpoint
-                segment.rgb += (1.0 - segment.a) * piece.rgb;
-                segment.a += (1.0 - segment.a) * piece.a;
+                segment = over(segment, piece);
                 if (t_even <= t_next) even += 1;
                 t_face += mix(vec3(0.0), t_cell, lessThanEqual(t_face, vec3(t_next)));
                 t_prev = t_next;

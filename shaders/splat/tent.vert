@@ -17,12 +17,6 @@
 #ifndef ORTHO
 #define ORTHO 0
 #endif
-#ifndef SHADING
-#define SHADING 0
-#endif
-#ifndef MASK_NONFINITE
-#define MASK_NONFINITE 0
-#endif
 
 uniform isampler2D t_order;       // the view's runs, sheet by sheet (TEXEL_ROW_WIDTH per row)
 uniform isampler2D t_runs;        // per run: its first sample's indices (x, y, z) and first row in
