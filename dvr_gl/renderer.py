@@ -50,6 +50,8 @@ class Renderer:
     def _new_gpu_state(self):
         """Empty caches of GPU objects for ``self.ctx``."""
         self.programs = ProgramCache(self.ctx)
+        # probed now, not in the middle of a draw: the probe binds its own target and texture
+        self.programs.context_defines
         self.created = []  # a log of ("texture kind", shape) for every texture made
         self._volumes = LRU(2)
         self._tfs = LRU(4)
@@ -337,7 +339,9 @@ class Renderer:
             rows = [table.texture_rows()] + ([] if fine is None else [fine.texture_rows()])
             data = np.ascontiguousarray(np.concatenate(rows))
             tex = self.ctx.texture((table.size, data.shape[0]), 4, data.tobytes(), dtype="f4")
-            tex.filter = (self.ctx.NEAREST, self.ctx.NEAREST)
+            # linear for texture() where the filter is exact; texelFetch ignores it
+            tex.filter = (self.ctx.LINEAR, self.ctx.LINEAR)
+            tex.repeat_x = tex.repeat_y = False
             self.created.append(("preintegration", (table.size, table.size)))
             return tex
         return self._preint.get(_Key(table, fine), make)

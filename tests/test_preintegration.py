@@ -13,6 +13,7 @@ import pytest
 
 import dvr_gl
 from dvr_gl.gl import harness
+from dvr_gl.gl.programs import linear_filter_is_exact
 from dvr_gl.preintegration import (OPAQUE_SENTINEL, TABLE_SIZE, PreintegrationTable, build_table,
                                    exact_segment, length_correction_error, mean_extinction, opacity_support)
 
@@ -362,7 +363,24 @@ def test_bad_input_raises_elsewhere():
 
 # -- preintegration.glsl ------------------------------------------------------------------
 
-def test_preintegrated_segment_matches_numpy_twin(ctx):
+def test_program_cache_sets_the_filter_switch_from_the_probe(renderer):
+    # every program that declares PREINT_TEXTURE_FILTER gets the probe's answer (those
+    # that do not, the other techniques' throughout the suite, build without it)
+    exact = linear_filter_is_exact(renderer.ctx)
+    assert renderer.programs.context_defines == {"PREINT_TEXTURE_FILTER": int(exact)}
+    volume = dvr_gl.Volume(np.linspace(0.0, 1.0, 6 ** 3, dtype=np.float32).reshape(6, 6, 6))
+    scene = dvr_gl.Scene(volume, RAMP, dvr_gl.default_camera(volume, azimuth=30, elevation=20), 12, 12)
+    renderer.render(scene, preintegrate=True)
+    sources = [fs for (v, f, *_), (vs, fs, *_) in renderer.programs.sources.items() if f == "raycast/raycast.frag"]
+    assert sources and all(f"#define PREINT_TEXTURE_FILTER {int(exact)}" in fs for fs in sources)
+
+
+@pytest.mark.parametrize("texture_filter", [0, 1])
+def test_preintegrated_segment_matches_numpy_twin(ctx, texture_filter):
+    # both ways of interpolating the table: in the shader, and (where the context's
+    # filter weights are exact, as the program cache sets it) by the texture unit
+    if texture_filter and not linear_filter_is_exact(ctx):
+        pytest.skip("this context's filter weights are quantised; the cache never sets the switch here")
     # value range offset from 0 (so lo's float32 rounding counts), an alpha = 1 plateau
     # (sentinel D), a narrow spike, zero-opacity stretches, colours changing everywhere
     tf = TF(color=[(-200.0, 0, 0, 1), (300.0, 1, 0, 0), (310.0, 0, 1, 0), (900.0, 1, 1, 1)],
@@ -383,11 +401,13 @@ def test_preintegrated_segment_matches_numpy_twin(ctx):
     inp = np.c_[sf, sb, length, np.zeros(n)].astype(np.float32)
     with ctx:
         tex = ctx.texture((table.size, 2 * table.size), 4, table.texture_bytes(), dtype="f4")
-        tex.filter = (ctx.NEAREST, ctx.NEAREST)
+        tex.filter = (ctx.LINEAR, ctx.LINEAR)
+        tex.repeat_x = tex.repeat_y = False
     try:
         gl = harness.evaluate(ctx, ["common/preintegration.glsl"],
                               "out0 = preintegratedSegment(in0.x, in0.y, in0.z);", [inp],
-                              textures={"t_preint": tex}, uniforms=table.uniforms()).astype(np.float64)
+                              textures={"t_preint": tex}, uniforms=table.uniforms(),
+                              defines={"PREINT_TEXTURE_FILTER": texture_filter}).astype(np.float64)
     finally:
         with ctx:
             tex.release()
@@ -403,6 +423,10 @@ def test_preintegrated_segment_matches_numpy_twin(ctx):
     # |dA| <= L |dD| + 2 U32 (the product, expm1Accurate, llvmpipe's exp: a few U32),
     # and C = K A: |dC| <= |dK| A + |K| |dA| + U32.
     du = U32 * (3 * (table.size - 1) + abs(table.lo) * table.scale)
+    if texture_filter:
+        # the texture unit's coordinate: (u + 0.5) / height rounded, times height, less 0.5,
+        # each rounded (the K0 rows sit up to 2 size down): <= 3 U32 (2 size) more
+        du += 6 * U32 * table.size
     t = table.table.astype(np.float64)
 
     def spread(s):

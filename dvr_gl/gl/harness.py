@@ -10,6 +10,7 @@ from .programs import apply_defines, resolve_text
 
 _TEMPLATE = """#version 330 core
 {includes}
+{preamble}
 in vec4 in0;
 in vec4 in1;
 in vec4 in2;
@@ -20,15 +21,16 @@ void main() {{
 """
 
 
-def evaluate(ctx, includes, body, inputs, textures=None, uniforms=None, defines=None):
+def evaluate(ctx, includes, body, inputs, textures=None, uniforms=None, defines=None, preamble=""):
     """Run ``body`` (GLSL statements assigning ``out0``, reading ``in0..in2``) once per
     row of the inputs (each an (N, 4) array, at most three) and return out0 as (N, 4)
-    float32. ``textures`` maps sampler names to moderngl textures."""
+    float32. ``textures`` maps sampler names to moderngl textures; ``preamble`` is GLSL
+    placed after the includes (declarations the body needs)."""
     arrays = [np.ascontiguousarray(a, dtype=np.float32) for a in inputs]
     n = arrays[0].shape[0]
     while len(arrays) < 3:
         arrays.append(np.zeros((n, 4), np.float32))
-    src = _TEMPLATE.format(includes="\n".join(f'#include "{i}"' for i in includes), body=body)
+    src = _TEMPLATE.format(includes="\n".join(f'#include "{i}"' for i in includes), preamble=preamble, body=body)
     src = apply_defines(resolve_text(src), defines or {})
     with current(ctx):
         prog = ctx.program(vertex_shader=src, varyings=["out0"])

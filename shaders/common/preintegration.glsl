@@ -19,22 +19,46 @@ uniform float u_pi_length;    // the nominal length of the table in rows 0 .. 2 
 uniform vec2 u_pi_cut;        // 1 where the table stops at the TF's last opacity on that side
                               // (below node 0, above the last): values beyond are empty
 
+#ifndef PREINT_TEXTURE_FILTER
+#define PREINT_TEXTURE_FILTER 0   // 1: the texture unit interpolates the table (set by the
+#endif                            // program cache where its weights are exact, as on llvmpipe)
+
+// The table's bilinear interpolant at node coordinates (back, front) of the rows from
+// first_row (the front index counts from there), in full float precision: by the texture
+// unit where its filter weights are exact (one read instead of four texel fetches),
+// else here.
+vec4 tableAt(float ub, float uf, int first_row) {
+#if PREINT_TEXTURE_FILTER
+    return texture(t_preint, (vec2(ub, uf + float(first_row)) + 0.5) / vec2(textureSize(t_preint, 0)));
+#else
+    int b0 = min(int(floor(ub)), u_pi_size - 2);
+    int f0 = min(int(floor(uf)), u_pi_size - 2);
+    float wb = ub - float(b0);
+    float wf = uf - float(f0);
+    f0 += first_row;
+    vec4 row0 = texelFetch(t_preint, ivec2(b0, f0), 0) * (1.0 - wb)
+              + texelFetch(t_preint, ivec2(b0 + 1, f0), 0) * wb;
+    vec4 row1 = texelFetch(t_preint, ivec2(b0, f0 + 1), 0) * (1.0 - wb)
+              + texelFetch(t_preint, ivec2(b0 + 1, f0 + 1), 0) * wb;
+    return row0 * (1.0 - wf) + row1 * wf;
+#endif
+}
+
 // g(x) = 1/x - 1/(e^x - 1) - 1/2: the mean position in [0, 1] under the density e^(-x t),
-// less 1/2 (series below 0.5; -1/2 as x grows without bound)
+// less 1/2 (series below 0.5, where the direct form cancels; -1/2 as x grows without
+// bound, where exp overflows to infinity). Both forms are computed and one selected:
+// llvmpipe runs both sides of a branch anyway, and exp(x) - 1 needs no care above 0.5.
 float meanOffset(float x) {
-    if (x < 0.5) {
-        float x2 = x * x;
-        return -x / 12.0 * (1.0 - x2 / 60.0 * (1.0 - x2 / 42.0));
-    }
-    if (x > 80.0) return 1.0 / x - 0.5;
-    return 1.0 / x - 1.0 / expm1Accurate(x) - 0.5;
+    float x2 = x * x;
+    float series = -x / 12.0 * (1.0 - x2 / 60.0 * (1.0 - x2 / 42.0));
+    float direct = 1.0 / x - 1.0 / (exp(x) - 1.0) - 0.5;
+    return x < 0.5 ? series : direct;
 }
 
 // Premultiplied (C, A) of a segment len world units long along which the scalar goes
 // linearly from s_front (nearest the eye) to s_back, from the table in rows first_row ..
 // first_row + 2 size - 1 made for segments `nominal` long. The table's values are
-// interpolated bilinearly here, in full float precision (the texture unit's filter
-// weights are the rasteriser's business), back index first, then front. The opacity
+// interpolated bilinearly (tableAt). The opacity
 // 1 - exp(-len D) is exact for every length. The colour per unit opacity is K at the
 // nominal length; at other lengths it moves along the line from K0 through K (towards
 // K0 as the segment shortens) by the weight that is exact for a constant extinction and
@@ -61,22 +85,8 @@ vec4 preintegratedSegmentIn(int first_row, float s_front, float s_back, float le
         float span = abs(ub_raw - uf_raw);
         len *= span > 0.0 ? clamp(abs(ub - uf) / span, 0.0, 1.0) : 0.0;
     }
-    int f0 = min(int(floor(uf)), u_pi_size - 2);
-    int b0 = min(int(floor(ub)), u_pi_size - 2);
-    float wf = uf - float(f0);
-    float wb = ub - float(b0);
-    f0 += first_row;
-    vec4 row0 = texelFetch(t_preint, ivec2(b0, f0), 0) * (1.0 - wb)
-              + texelFetch(t_preint, ivec2(b0 + 1, f0), 0) * wb;
-    vec4 row1 = texelFetch(t_preint, ivec2(b0, f0 + 1), 0) * (1.0 - wb)
-              + texelFetch(t_preint, ivec2(b0 + 1, f0 + 1), 0) * wb;
-    vec4 v = row0 * (1.0 - wf) + row1 * wf;
-    int z0 = f0 + u_pi_size;
-    vec3 zero0 = texelFetch(t_preint, ivec2(b0, z0), 0).rgb * (1.0 - wb)
-               + texelFetch(t_preint, ivec2(b0 + 1, z0), 0).rgb * wb;
-    vec3 zero1 = texelFetch(t_preint, ivec2(b0, z0 + 1), 0).rgb * (1.0 - wb)
-               + texelFetch(t_preint, ivec2(b0 + 1, z0 + 1), 0).rgb * wb;
-    vec3 k0 = zero0 * (1.0 - wf) + zero1 * wf;
+    vec4 v = tableAt(ub, uf, first_row);
+    vec3 k0 = tableAt(ub, uf, first_row + u_pi_size).rgb;
     float od = len * v.a;
     float g_nominal = meanOffset(nominal * v.a);
     float w = g_nominal != 0.0 ? meanOffset(od) / g_nominal : 1.0;

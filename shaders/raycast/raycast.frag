@@ -124,7 +124,8 @@ bool emptyBrickExit(vec3 p, vec3 origin, vec3 dir, out float t_exit) {
 // A pre-integrated segment k (midpoint p) came out fully transparent: if its brick is
 // empty, every later segment with both ends in the brick is exactly zero (its ends'
 // values, and the table nodes around them, have zero opacity); return the last of them
-// (k if none): the one after it starts afresh with its own front sample.
+// (k if none). The one after it needs its front sample: the caller walks the last one
+// again only to read its end.
 int lastSegmentInEmptyBrick(vec3 p, vec3 origin, vec3 dir, float t0, float jitter, int k) {
     float t_exit;
     if (!emptyBrickExit(p, origin, dir, t_exit)) return k;
@@ -185,8 +186,8 @@ void main() {
     float t_peak = 0.0;
   #endif
   #if PREINTEGRATE
-    float s_front = 0.0;      // the field at the current segment's start
-    bool have_front = false;
+    float s_front = sampleVolume(origin + t0 * dir);   // the field at the current segment's start
+    bool have_front = true;
   #endif
 #elif MODE_MIP
     float s_best = -1.0 / 0.0;
@@ -258,8 +259,15 @@ void main() {
 #endif
 #if MODE_COMPOSITE && PREINTEGRATE
         // the whole segment from the field at its two ends (the end is the next start)
-        if (!have_front) s_front = sampleVolume(origin + a * dir);
         float s_back = sampleVolume(origin + b * dir);
+    #if MASK_NONFINITE
+        if (!have_front) s_front = sampleVolume(origin + a * dir);
+    #else
+        // After a skip the segment only reads its end, the next one's front (below):
+        // llvmpipe runs an if's body for every pixel, so a fetch of the front under
+        // !have_front would cost every segment a second fetch.
+        bool priming = !have_front;
+    #endif
   #if REFINE
         // The field may leave the straight line between the ends by the gradient bound
         // times the distance: if the values it can reach touch a bend of the TF's opacity
@@ -304,11 +312,18 @@ void main() {
   #endif
         s_front = s_back;
         have_front = true;
+  #if !MASK_NONFINITE
+        if (priming) continue;
+  #endif
   #if SKIP_EMPTY
         if (segment.a <= 0.0) {
             int k_last = lastSegmentInEmptyBrick(p, origin, dir, t0, jitter, k);
             if (k_last > k) {
+      #if MASK_NONFINITE
                 k = k_last;
+      #else
+                k = k_last - 1;   // segment k_last, inside the empty brick, reads the front
+      #endif
                 have_front = false;
             }
             continue;
