@@ -131,10 +131,12 @@ def estimated_cost(choice):
 
 def fastest(choices, frame_seconds):
     """The Choice whose frame is fastest by ``frame_seconds(choice)``; those whose
-    estimated cost is over 4x the lowest are not timed, and another than the estimate's
-    cheapest is taken only when it is at least TIMING_MARGIN faster (timings of small
-    frames are noisy: the estimate decides close calls)."""
-    cheapest = min(estimated_cost(c) for c in choices)
+    estimated cost is over 4x the lowest estimate of an unrefined way are not timed (a
+    refined way's estimate is only a lower bound: it must not rule the others out), and
+    another than the estimate's cheapest is taken only when it is at least TIMING_MARGIN
+    faster (timings of small frames are noisy: the estimate decides close calls)."""
+    unrefined = [estimated_cost(c) for c in choices if c.refine == 1]
+    cheapest = min(unrefined or [estimated_cost(c) for c in choices])
     timed = [dataclasses.replace(c, frame_seconds=frame_seconds(c)) for c in choices
              if estimated_cost(c) <= 4 * cheapest]
     expected = min(timed, key=estimated_cost)

@@ -161,6 +161,12 @@ def test_fastest_takes_the_least_frame_time_and_leaves_out_dear_estimates():
     # a close call (within TIMING_MARGIN) stays with the estimate's cheapest: plain at 1 voxel
     close = tolerance.fastest([c(1.0), c(1.5, True)], lambda ch: {1.0: 1.0, 1.5: 0.9}[ch.step_voxels])
     assert close.step_voxels == 1.0 and not close.preintegrate and close.frame_seconds == 1.0
+    # a refined way's estimate is a lower bound: its being low rules no other way out
+    # (plain at 0.25 voxel, estimate 4, beside refined at 2 voxels, bound 0.8)
+    seen.clear()
+    best = tolerance.fastest([c(0.25), c(2.0, True, 4)], lambda ch: seen.append(ch.step_voxels) or
+                             {0.25: 1.0, 2.0: 3.0}[ch.step_voxels])
+    assert sorted(seen) == [0.25, 2.0] and best.step_voxels == 0.25 and not best.preintegrate
 
 
 def test_the_model_measures_each_pilot_step_against_the_richardson_image():
