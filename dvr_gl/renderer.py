@@ -61,7 +61,7 @@ class Renderer:
         self._stacks = LRU(3)
         self._preint = LRU(2)
         self._streams = {}
-        self._targets = LRU(3)
+        self._targets = LRU(6)
         self._vbos = {}
         self._vaos = {}
         self.tables = TableCache()
@@ -357,12 +357,14 @@ class Renderer:
             self._small[key] = tex
         return tex
 
-    def target(self, width, height, dtype):
+    def target(self, width, height, dtype, kind="target"):
+        """A framebuffer with one RGBA texture of ``dtype``, kept per size and ``kind``
+        (the image's own, or a technique's auxiliary pass)."""
         def make():
             tex = self.ctx.texture((width, height), 4, dtype=dtype)
-            self.created.append(("target", (height, width, dtype)))
+            self.created.append((kind, (height, width, dtype)))
             return _Target(self.ctx.framebuffer([tex]), tex, self._idle_fbo)
-        return self._targets.get((width, height, dtype), make).fbo
+        return self._targets.get((kind, width, height, dtype), make).fbo
 
     def read_target(self, fbo, width, height):
         """Read back as float32 (GL finishes before this returns), row 0 on top."""

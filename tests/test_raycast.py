@@ -119,6 +119,65 @@ def test_empty_space_skipping_changes_no_pixel(renderer):
     np.testing.assert_array_equal(on, off)
 
 
+def _occupied_range_scene(camera_name, ortho_box=False):
+    # one small blob off centre: most rays meet no occupied brick, the rest meet few
+    volume = blobs(shape=(40, 48, 56))
+    tf = dvr_gl.TransferFunction(color=TF.color_points, opacity=[(75, 0.0), (90, 0.6), (100, 0.9)])
+    return dvr_gl.Scene(volume, tf, cameras(volume)[camera_name], width=48, height=40)
+
+
+@pytest.mark.parametrize("camera", ["perspective", "ortho", "axis_aligned", "diagonal_45"])
+def test_occupied_range_brackets_every_occupied_sample(renderer, camera):
+    """The pass's (entry, exit) per pixel holds every point of the ray that the ray
+    caster would place in an occupied brick (marched finely in float64, bricks found as
+    the shader finds them), and leaves rays far from them empty."""
+    from dvr_gl.gl.context import current
+    from dvr_gl.reference.common import box_rays
+    scene = _occupied_range_scene(camera)
+    plan = raycast.make_plan(scene, step=0.5)
+    occ = plan.occupancy
+    assert 0 < occ.sum() < 0.2 * occ.size
+    with current(renderer.ctx):
+        tex = raycast.occupied_range(renderer, plan)
+        rng = np.frombuffer(tex.read(), np.float32).reshape(scene.height, scene.width, 4)[::-1].reshape(-1, 4)
+    enter, leave = rng[:, 0].astype(np.float64), -rng[:, 1].astype(np.float64)
+    o, d, t0, t1 = box_rays(scene)
+    brick = raycast.BRICK * np.asarray(scene.volume.spacing)
+    shape = np.array(occ.shape[::-1])
+    hit = np.zeros(len(o), bool)
+    near = np.zeros(len(o), bool)
+    for i in np.flatnonzero(t1 > t0):
+        t = np.arange(t0[i], t1[i], 0.02)
+        p = o[i] + t[:, None] * d[i]
+        b = np.clip(np.floor(p / brick).astype(int), 0, shape - 1)
+        inside = occ[b[:, 2], b[:, 1], b[:, 0]]
+        if inside.any():
+            hit[i] = True
+            assert enter[i] <= t[inside].min() and leave[i] >= t[inside].max(), i
+        # a ray at least a brick away from every occupied brick: its range is empty
+        grown = np.clip(np.floor(p / brick + 0.5).astype(int), 0, shape - 1)
+        near[i] = inside.any() or occ[grown[:, 2], grown[:, 1], grown[:, 0]].any()
+    assert 0 < hit.sum() < len(o)
+    far = ~near & (t1 > t0)
+    assert far.sum() > 0.3 * (t1 > t0).sum()   # the scene leaves many rays far from the blob
+    wide = np.zeros_like(far)
+    for i in np.flatnonzero(far):
+        wide[i] = leave[i] < enter[i]
+    assert wide[far].mean() > 0.9
+
+
+@pytest.mark.parametrize("camera", ["perspective", "ortho", "eye_inside", "diagonal_45"])
+@pytest.mark.parametrize("opts", [dict(step=0.7), dict(step=0.7, jitter_seed=3), dict(step=1.1, preintegrate=True),
+                                  dict(step=1.3, preintegrate=True, refine=4, jitter_seed=3)],
+                         ids=["plain", "jitter", "preint", "refine"])
+def test_occupied_range_changes_no_pixel(renderer, camera, opts):
+    scene = _occupied_range_scene(camera)
+    on = renderer.render(scene, ert_transmittance=0.0, **opts)
+    off = renderer.render(scene, ert_transmittance=0.0, skip_empty=False, **opts)
+    assert on[..., 3].max() > 0.1
+    np.testing.assert_array_equal(on, off)
+
+
 def test_empty_space_skipping_identical_on_a_real_ct(renderer):
     from dvr_gl import data
     head = data.ct_head()
@@ -297,9 +356,11 @@ def test_unlit_composite_scene_builds_only_what_it_uses():
         assert not {"u_phong", "u_gradient_epsilon", "t_jitter", "t_occupancy", "t_cell_valid"} & set(prog)
         assert "#define MODE_COMPOSITE 1" in fs
         r.render(scene, skip_empty=True, jitter_seed=1)
-        assert sorted(k for k, _ in r.created) == ["jitter", "occupancy", "step_tf", "target", "tf", "volume"]
+        # skipping adds the brick occupancy and the pass that finds each ray's occupied range
+        assert sorted(k for k, _ in r.created) == ["jitter", "occupancy", "occupied_faces", "occupied_range",
+                                                   "step_tf", "target", "tf", "volume"]
         r.render(scene, skip_empty=True, jitter_seed=1)  # a second frame makes nothing new
-        assert len(r.created) == 6
+        assert len(r.created) == 8
         iso = scene.replace(mode="isosurface", iso_value=40.0)
         r.render(iso)
         iso_prog = [p for (v, f, d), p in r.programs._programs.items() if ("MODE_ISOSURFACE", 1) in d][0]

@@ -423,6 +423,20 @@ def box_proxy(scene, grow_pixels=0.0):
     to a grid (``grow_pixels(ctx)``), never drops a pixel whose ray meets the box: the
     shaders decide coverage themselves."""
     import pyrr
+    kind, view_proj, grow = box_view(scene, grow_pixels)
+    if kind == "fullscreen":
+        return kind, view_proj
+    extent = scene.volume.extent
+    model = (pyrr.matrix44.create_from_scale(extent + 2 * grow, dtype=np.float64)
+             @ pyrr.matrix44.create_from_translation(np.full(3, -grow), dtype=np.float64))
+    return "box", model @ view_proj
+
+
+def box_view(scene, grow_pixels=0.0):
+    """(kind, view-projection, grow) behind ``box_proxy``: for "box", the view-projection
+    of box-relative positions whose near and far planes clip nothing within ``grow``
+    world units of the box (the box grown by ``grow_pixels`` pixels at its farthest
+    depth); "fullscreen" (identity, grow 0) with the eye inside or nearly on the box."""
     cam = scene.camera
     lo, _ = scene.volume.bounds
     extent = scene.volume.extent
@@ -438,15 +452,13 @@ def box_proxy(scene, grow_pixels=0.0):
         gap = np.maximum(np.maximum(-eye, eye - extent), 0.0)
         distance = float(np.linalg.norm(gap))
         if distance < margin:
-            return "fullscreen", np.eye(4)
+            return "fullscreen", np.eye(4), 0.0
         # Every exit point is at least `distance - grow * sqrt(3)` from the eye and within
         # the view's diagonal half-angle of the axis, so this near plane never clips a
         # back face.
         near = 0.5 * (distance - 1.75 * grow) / math.sqrt(1.0 + hx * hx + hy * hy)
         far = dmax * 1.01 + margin
-    model = (pyrr.matrix44.create_from_scale(extent + 2 * grow, dtype=np.float64)
-             @ pyrr.matrix44.create_from_translation(np.full(3, -grow), dtype=np.float64))
-    return "box", model @ eye_view_projection(scene, near, far)
+    return "box", eye_view_projection(scene, near, far), grow
 
 
 def grow_pixels(ctx):

@@ -40,6 +40,13 @@ skip_empty : empty-space skipping (composite mode only). The volume is cut into 
     table's bilinear nodes around any value in it are then all zero); a transparent
     segment in such a brick lets the ray jump over every later segment with both ends
     in it, each exactly zero, and the one after starts with a fresh front sample.
+    Before the ray casting a pass finds, per pixel, where its ray first enters and last
+    leaves the occupied bricks (``occupied_range``: the faces between occupied and empty
+    bricks, each brick grown by a margin, drawn with MIN blending; each fragment gives
+    its distance along the pixel's ray as an entry or an exit), and the ray's segments
+    start and stop one segment beyond: all the segments outside lie in empty bricks,
+    which the per-sample skip would have passed over one SIMD group at a time. With the
+    eye inside or nearly on the box the pass is left out.
 preintegrate : composite mode: classify each segment as a whole from the field at its two
     ends with the pre-integrated table (``dvr_gl.preintegration``; its segment length is
     the step, and the shorter first and last segments are corrected as that module
@@ -87,8 +94,8 @@ import numpy as np
 from ..cache import TableCache
 from ..scene import Scene
 from ..transfer import LookupTable
-from .common import (cleared_target, add_optional_inputs, bind, box_proxy, camera_uniforms, check_flag, check_scene,
-                     grow_pixels, shading_defines,
+from .common import (cleared_target, add_optional_inputs, bind, box_proxy, box_view, camera_uniforms, check_flag,
+                     check_scene, grow_pixels, shading_defines,
                      check_step, check_target, preintegration_applies, preintegration_table, tf_uniforms, volume_uniforms)
 
 BRICK = 8            # brick edge in cells, for empty-space skipping
@@ -374,6 +381,87 @@ def brick_occupancy(ranges, lut):
     return lut.max_opacity_between(lut.lo + u0 / lut.scale, lut.lo + u1 / lut.scale) > 0
 
 
+def occupied_faces(occupied, volume, margin, limit):
+    """The faces of the occupied bricks (``occupied``, (bricks z, y, x) booleans) that
+    border an empty brick or the volume's edge, as triangles: (6 n, 6) float32 rows of
+    (vertex, outward normal), positions relative to the volume's lower corner. Each face
+    is one of its brick's box grown by ``margin`` world units on every side and clipped
+    to ``limit`` beyond the volume (so that nothing leaves the proxy's clip volume). A
+    ray first meets the union of the grown boxes on such a face, facing it, and last
+    leaves it through one facing away: a neighbour's grown box holds the face between two
+    occupied bricks."""
+    occupied = np.asarray(occupied, bool)
+    spacing = np.asarray(volume.spacing, np.float64)
+    extent = np.asarray(volume.extent, np.float64)
+    idx = np.argwhere(occupied)[:, ::-1]                       # (n, 3) brick x, y, z
+    lo = np.maximum(idx * BRICK * spacing - margin, -limit)
+    hi = np.minimum(np.minimum((idx + 1) * BRICK * spacing, extent) + margin, extent + limit)
+    padded = np.pad(occupied, 1)
+    quads = []
+    for axis in range(3):                                       # x, y, z
+        for side in (0, 1):
+            shift = np.zeros(3, int)
+            shift[axis] = 1 if side else -1
+            x, y, z = (idx + 1 + shift).T
+            open_face = ~padded[z, y, x]
+            if not open_face.any():
+                continue
+            a, b = lo[open_face], hi[open_face]
+            u, v = (axis + 1) % 3, (axis + 2) % 3
+            corners = np.repeat(a[:, None, :], 4, axis=1)
+            corners[:, :, axis] = (b if side else a)[:, axis][:, None]
+            corners[:, 1:3, u] = b[:, None, u]
+            corners[:, 2:4, v] = b[:, None, v]
+            tris = corners[:, [0, 1, 2, 0, 2, 3], :]
+            normals = np.broadcast_to(shift.astype(np.float64), tris.shape)
+            quads.append(np.concatenate([tris, normals], axis=2).reshape(-1, 6))
+    if not quads:
+        return np.zeros((0, 6), np.float32)
+    return np.concatenate(quads).astype(np.float32)
+
+
+def occupied_range(renderer, plan):
+    """The pixels' (least entry, -greatest exit) into the occupied bricks' grown boxes
+    along their rays (``occupied_faces``, blended with MIN), as an RGBA32F texture the
+    size of the plan's target (3e38 in both where the ray meets none); None where the
+    pass does not apply (no skipping, or the eye inside or nearly on the box)."""
+    occupied = plan.occupancy if plan.occupancy is not None else plan.bricks
+    scene = plan.scene
+    if occupied is None:
+        return None
+    ctx = renderer.ctx
+    kind, view_proj, grow = box_view(scene, grow_pixels(ctx))
+    if kind != "box":
+        return None
+    volume = scene.volume
+    # well beyond float rounding of a sample's brick and of the interpolated face position
+    # (a few 1e-7 of the coordinate), and four times the rasteriser's vertex snapping, so
+    # a ray that a snapped face misses passes at least `margin - grow` from its brick
+    margin = max(0.25 * volume.min_spacing, 4.0 * grow)
+    def make():
+        faces = occupied_faces(occupied, volume, margin, grow)
+        return ctx.buffer(faces.tobytes()) if len(faces) else None
+    mesh = renderer.resource("occupied_faces", occupied, volume, make=make)
+    defines = {"ORTHO": 1} if scene.camera.is_ortho else {}
+    prog = renderer.programs.get("raycast/occupied_range.vert", "raycast/occupied_range.frag", defines)
+    bind(prog, {}, camera_uniforms(scene))
+    prog["u_view_proj"].write(view_proj.astype("f4").tobytes())
+    fbo = renderer.target(*scene.target_size, "f4", kind="occupied_range")
+    fbo.use()
+    fbo.clear(3e38, 3e38, 0.0, 0.0)
+    if mesh is not None:
+        vertices = mesh.size // 24
+        vao = ctx.vertex_array(prog, [(mesh, "3f 3f", "a_position", "a_normal")])
+        ctx.disable(ctx.DEPTH_TEST | ctx.CULL_FACE)
+        ctx.enable(ctx.BLEND)
+        ctx.blend_equation = ctx.MIN
+        vao.render(vertices=vertices)
+        ctx.blend_equation = ctx.FUNC_ADD
+        ctx.disable(ctx.BLEND)
+        vao.release()
+    return fbo.color_attachments[0]
+
+
 # ---------------------------------------------------------------------------------------
 # GL path
 
@@ -403,9 +491,13 @@ def draw(renderer, plan):
     ctx = renderer.ctx
     scene = plan.scene
     volume = scene.volume
-    prog = renderer.programs.get("raycast/raycast.vert", "raycast/raycast.frag", plan.defines)
+    occupied = occupied_range(renderer, plan)
+    defines = dict(plan.defines, OCCUPIED_RANGE=1) if occupied is not None else plan.defines
+    prog = renderer.programs.get("raycast/raycast.vert", "raycast/raycast.frag", defines)
 
     textures = {"t_volume": renderer.volume_texture(volume), "t_tf": renderer.tf_texture(plan.lut)}
+    if occupied is not None:
+        textures["t_occupied_range"] = occupied
     if plan.jitter is not None:
         textures["t_jitter"] = renderer.small_texture("jitter", plan.jitter)
     if plan.occupancy is not None:

@@ -106,6 +106,14 @@ uniform float u_iso;
 
 out vec4 f_color;
 
+#ifndef OCCUPIED_RANGE
+#define OCCUPIED_RANGE 0   // segments start and stop where the ray meets occupied bricks
+#endif
+#if OCCUPIED_RANGE
+uniform sampler2D t_occupied_range;   // per pixel: (least entry, -greatest exit) into the
+                                      // occupied bricks' grown boxes (raycast.occupied_range)
+#endif
+
 #if SKIP_EMPTY
 // Whether the brick holding p is empty, and if so where the ray leaves it.
 bool emptyBrickExit(vec3 p, vec3 origin, vec3 dir, out float t_exit) {
@@ -186,7 +194,7 @@ void main() {
     float t_peak = 0.0;
   #endif
   #if PREINTEGRATE
-    float s_front = sampleVolume(origin + t0 * dir);   // the field at the current segment's start
+    float s_front = 0.0;      // the field at the current segment's start (read below)
     bool have_front = true;
   #endif
 #elif MODE_MIP
@@ -203,6 +211,15 @@ void main() {
     float t_hit = -1.0;
 #endif
 
+#if OCCUPIED_RANGE
+    // Every segment wholly outside [t_enter, t_leave] lies in empty bricks and is exactly
+    // zero; the loops below start and stop one segment beyond (t_leave < t_enter where
+    // the ray meets no occupied brick).
+    vec2 occupied = texelFetch(t_occupied_range, ivec2(gl_FragCoord.xy), 0).rg;
+    float t_enter = occupied.x;
+    float t_leave = -occupied.y;
+#endif
+
 #if STEP_TABLE
     // Full segments k = 0 .. n_full - 1 span [t0 + (jitter + k) * step, t0 + (jitter + k +
     // 1) * step] and read their corrected, premultiplied segment from the step table; the
@@ -213,7 +230,14 @@ void main() {
     int n_full = max(int(floor((t1 - t0) / u_step - jitter)), 0);
     compositePartial(origin, dir, t0, min(t0 + jitter * u_step, t1), color, alpha_acc);
     bool ended = false;
-    for (int k = 0; k < n_full && k < u_max_segments; ++k) {
+    int k_first = 0;
+    int k_stop = n_full;
+  #if OCCUPIED_RANGE
+    // sample k sits at t0 + (jitter + k + 0.5) step
+    k_first = int(clamp(floor((t_enter - t0) / u_step - jitter - 0.5), 0.0, float(n_full)));
+    k_stop = int(clamp(ceil((t_leave - t0) / u_step - jitter - 0.5) + 1.0, 0.0, float(n_full)));
+  #endif
+    for (int k = k_first; k < k_stop && k < u_max_segments; ++k) {
         vec3 p = origin + (t0 + (jitter + float(k) + 0.5) * u_step) * dir;
   #if MASK_NONFINITE
         if (!insideValidCell(p)) continue;
@@ -241,7 +265,16 @@ void main() {
     // Segment k spans [t0 + (jitter + k) * step, t0 + (jitter + k + 1) * step] clipped to
     // [t0, t1]; k = -1 is the partial segment in front of a jittered start. Positions come
     // from k, never from accumulation, so skipping segments cannot move a sample.
-    for (int k = -1; k < u_max_segments; ++k) {
+    int k_first = -1;
+    int k_last = u_max_segments;
+  #if OCCUPIED_RANGE
+    k_first = int(clamp(floor((t_enter - t0) / u_step - jitter) - 1.0, -1.0, float(u_max_segments)));
+    k_last = int(clamp(floor((t_leave - t0) / u_step - jitter) + 1.0, -1.0, float(u_max_segments)));
+  #endif
+  #if MODE_COMPOSITE && PREINTEGRATE
+    s_front = sampleVolume(origin + max(t0 + (jitter + float(k_first)) * u_step, t0) * dir);
+  #endif
+    for (int k = k_first; k <= k_last && k < u_max_segments; ++k) {
         float a = max(t0 + (jitter + float(k)) * u_step, t0);
         if (a >= t1) break;
         float b = min(t0 + (jitter + float(k + 1)) * u_step, t1);
