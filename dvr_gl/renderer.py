@@ -357,14 +357,15 @@ class Renderer:
             self._small[key] = tex
         return tex
 
-    def target(self, width, height, dtype, kind="target"):
-        """A framebuffer with one RGBA texture of ``dtype``, kept per size and ``kind``
-        (the image's own, or a technique's auxiliary pass)."""
+    def target(self, width, height, dtype, kind="target", components=4):
+        """A framebuffer with one texture of ``components`` channels of ``dtype`` (RGBA
+        for images), kept per size and ``kind`` (the image's own, or a technique's
+        auxiliary pass)."""
         def make():
-            tex = self.ctx.texture((width, height), 4, dtype=dtype)
+            tex = self.ctx.texture((width, height), components, dtype=dtype)
             self.created.append((kind, (height, width, dtype)))
             return _Target(self.ctx.framebuffer([tex]), tex, self._idle_fbo)
-        return self._targets.get((kind, width, height, dtype), make).fbo
+        return self._targets.get((kind, width, height, dtype, components), make).fbo
 
     def read_target(self, fbo, width, height):
         """Read back as float32 (GL finishes before this returns), row 0 on top."""

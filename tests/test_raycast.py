@@ -139,7 +139,7 @@ def test_occupied_range_brackets_every_occupied_sample(renderer, camera):
     assert 0 < occ.sum() < 0.2 * occ.size
     with current(renderer.ctx):
         tex = raycast.occupied_range(renderer, plan)
-        rng = np.frombuffer(tex.read(), np.float32).reshape(scene.height, scene.width, 4)[::-1].reshape(-1, 4)
+        rng = np.frombuffer(tex.read(), np.float32).reshape(scene.height, scene.width, 2)[::-1].reshape(-1, 2)
     enter, leave = rng[:, 0].astype(np.float64), -rng[:, 1].astype(np.float64)
     o, d, t0, t1 = box_rays(scene)
     brick = raycast.BRICK * np.asarray(scene.volume.spacing)

@@ -422,7 +422,7 @@ def occupied_faces(occupied, volume, margin, limit):
 
 def occupied_range(renderer, plan):
     """The pixels' (least entry, -greatest exit) into the occupied bricks' grown boxes
-    along their rays (``occupied_faces``, blended with MIN), as an RGBA32F texture the
+    along their rays (``occupied_faces``, blended with MIN), as an RG32F texture the
     size of the plan's target (3e38 in both where the ray meets none); None where the
     pass does not apply (no skipping, or the eye inside or nearly on the box)."""
     occupied = plan.occupancy if plan.occupancy is not None else plan.bricks
@@ -446,7 +446,7 @@ def occupied_range(renderer, plan):
     prog = renderer.programs.get("raycast/occupied_range.vert", "raycast/occupied_range.frag", defines)
     bind(prog, {}, camera_uniforms(scene))
     prog["u_view_proj"].write(view_proj.astype("f4").tobytes())
-    fbo = renderer.target(*scene.target_size, "f4", kind="occupied_range")
+    fbo = renderer.target(*scene.target_size, "f4", kind="occupied_range", components=2)
     fbo.use()
     fbo.clear(3e38, 3e38, 0.0, 0.0)
     if mesh is not None:

@@ -12,7 +12,7 @@ uniform vec3 u_eye;          // relative to the volume box's lower corner
 uniform vec3 u_forward;
 in vec3 v_position;
 flat in vec3 v_normal;
-out vec4 f_range;
+out vec2 f_range;
 
 void main() {
     vec3 to_face = v_position - u_eye;
@@ -23,5 +23,5 @@ void main() {
     float t = length(to_face);
     bool entry = dot(v_normal, to_face) < 0.0;
 #endif
-    f_range = entry ? vec4(t, 3e38, 0.0, 0.0) : vec4(3e38, -t, 0.0, 0.0);
+    f_range = entry ? vec2(t, 3e38) : vec2(3e38, -t);
 }
