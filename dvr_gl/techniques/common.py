@@ -432,11 +432,12 @@ def box_proxy(scene, grow_pixels=0.0):
     return "box", model @ view_proj
 
 
-def box_view(scene, grow_pixels=0.0):
+def box_view(scene, grow_pixels=0.0, pad=0.0):
     """(kind, view-projection, grow) behind ``box_proxy``: for "box", the view-projection
-    of box-relative positions whose near and far planes clip nothing within ``grow``
-    world units of the box (the box grown by ``grow_pixels`` pixels at its farthest
-    depth); "fullscreen" (identity, grow 0) with the eye inside or nearly on the box."""
+    of box-relative positions whose near and far planes clip nothing within
+    ``max(grow, pad)`` world units of the box (``grow``: ``grow_pixels`` pixels at its
+    farthest depth); "fullscreen" (identity, grow 0) with the eye inside or nearly on
+    the box so grown."""
     cam = scene.camera
     lo, _ = scene.volume.bounds
     extent = scene.volume.extent
@@ -445,7 +446,8 @@ def box_view(scene, grow_pixels=0.0):
     hx, hy = cam.screen_scale(scene.width, scene.height)
     pixel = 2.0 * hy / scene.height * (1.0 if cam.is_ortho else max(dmax, 0.0))
     grow = grow_pixels * pixel
-    margin = 1e-3 * float(np.linalg.norm(extent)) + 2.0 * grow
+    reach = max(grow, pad)
+    margin = 1e-3 * float(np.linalg.norm(extent)) + 2.0 * reach
     if cam.is_ortho:
         near, far = dmin - margin, dmax + margin
     else:
@@ -453,10 +455,10 @@ def box_view(scene, grow_pixels=0.0):
         distance = float(np.linalg.norm(gap))
         if distance < margin:
             return "fullscreen", np.eye(4), 0.0
-        # Every exit point is at least `distance - grow * sqrt(3)` from the eye and within
-        # the view's diagonal half-angle of the axis, so this near plane never clips a
-        # back face.
-        near = 0.5 * (distance - 1.75 * grow) / math.sqrt(1.0 + hx * hx + hy * hy)
+        # Every point within `reach` of the box is at least `distance - reach * sqrt(3)`
+        # from the eye and, where it is in view, within the view's diagonal half-angle of
+        # the axis, so this near plane clips none of them.
+        near = 0.5 * (distance - 1.75 * reach) / math.sqrt(1.0 + hx * hx + hy * hy)
         far = dmax * 1.01 + margin
     return "box", eye_view_projection(scene, near, far), grow
 

@@ -381,21 +381,20 @@ def brick_occupancy(ranges, lut):
     return lut.max_opacity_between(lut.lo + u0 / lut.scale, lut.lo + u1 / lut.scale) > 0
 
 
-def occupied_faces(occupied, volume, margin, limit):
+def occupied_faces(occupied, volume, margin):
     """The faces of the occupied bricks (``occupied``, (bricks z, y, x) booleans) that
     border an empty brick or the volume's edge, as triangles: (6 n, 6) float32 rows of
     (vertex, outward normal), positions relative to the volume's lower corner. Each face
-    is one of its brick's box grown by ``margin`` world units on every side and clipped
-    to ``limit`` beyond the volume (so that nothing leaves the proxy's clip volume). A
-    ray first meets the union of the grown boxes on such a face, facing it, and last
-    leaves it through one facing away: a neighbour's grown box holds the face between two
-    occupied bricks."""
+    is one of its brick's box grown by ``margin`` world units on every side. A ray first
+    meets the union of the grown boxes on such a face, facing it, and last leaves it
+    through one facing away: a neighbour's grown box holds the face between two occupied
+    bricks."""
     occupied = np.asarray(occupied, bool)
     spacing = np.asarray(volume.spacing, np.float64)
     extent = np.asarray(volume.extent, np.float64)
     idx = np.argwhere(occupied)[:, ::-1]                       # (n, 3) brick x, y, z
-    lo = np.maximum(idx * BRICK * spacing - margin, -limit)
-    hi = np.minimum(np.minimum((idx + 1) * BRICK * spacing, extent) + margin, extent + limit)
+    lo = idx * BRICK * spacing - margin
+    hi = np.minimum((idx + 1) * BRICK * spacing, extent) + margin
     padded = np.pad(occupied, 1)
     quads = []
     for axis in range(3):                                       # x, y, z
@@ -430,18 +429,21 @@ def occupied_range(renderer, plan):
     if occupied is None:
         return None
     ctx = renderer.ctx
-    kind, view_proj, grow = box_view(scene, grow_pixels(ctx))
-    if kind != "box":
-        return None
     volume = scene.volume
+    _, _, grow = box_view(scene, grow_pixels(ctx))
     # well beyond float rounding of a sample's brick and of the interpolated face position
     # (a few 1e-7 of the coordinate), and four times the rasteriser's vertex snapping, so
-    # a ray that a snapped face misses passes at least `margin - grow` from its brick
-    margin = max(0.25 * volume.min_spacing, 4.0 * grow)
+    # a ray that a snapped face misses passes at least `margin - grow` from its brick;
+    # rounded up to a power of two, so that the faces serve every view that needs no more
+    margin = 2.0 ** math.ceil(math.log2(max(0.25 * volume.min_spacing, 4.0 * grow)))
+    kind, view_proj, _ = box_view(scene, grow_pixels(ctx), pad=margin)
+    if kind != "box":
+        return None
+
     def make():
-        faces = occupied_faces(occupied, volume, margin, grow)
+        faces = occupied_faces(occupied, volume, margin)
         return ctx.buffer(faces.tobytes()) if len(faces) else None
-    mesh = renderer.resource("occupied_faces", occupied, volume, make=make)
+    mesh = renderer.resource("occupied_faces", occupied, volume, margin, make=make)
     defines = {"ORTHO": 1} if scene.camera.is_ortho else {}
     prog = renderer.programs.get("raycast/occupied_range.vert", "raycast/occupied_range.frag", defines)
     bind(prog, {}, camera_uniforms(scene))
