@@ -166,6 +166,21 @@ def test_occupied_range_brackets_every_occupied_sample(renderer, camera):
     assert wide[far].mean() > 0.9
 
 
+def test_occupied_range_pass_runs_only_where_it_can_shorten_a_ray(renderer):
+    from dvr_gl.gl.context import current
+    scene = _occupied_range_scene("perspective")
+    with current(renderer.ctx):
+        assert raycast.occupied_range(renderer, raycast.make_plan(scene, step=0.5)) is not None
+        # every brick occupied: the range would be the box's own
+        full = scene.replace(tf=dvr_gl.TransferFunction(color=TF.color_points, opacity=[(0, 0.1), (100, 0.5)]))
+        assert raycast.make_plan(full, step=0.5).occupancy.all()
+        assert raycast.occupied_range(renderer, raycast.make_plan(full, step=0.5)) is None
+        # the eye inside the box, or skipping off
+        inside = _occupied_range_scene("eye_inside")
+        assert raycast.occupied_range(renderer, raycast.make_plan(inside, step=0.5)) is None
+        assert raycast.occupied_range(renderer, raycast.make_plan(scene, step=0.5, skip_empty=False)) is None
+
+
 @pytest.mark.parametrize("camera", ["perspective", "ortho", "eye_inside", "diagonal_45"])
 @pytest.mark.parametrize("opts", [dict(step=0.7), dict(step=0.7, jitter_seed=3), dict(step=1.1, preintegrate=True),
                                   dict(step=1.3, preintegrate=True, refine=4, jitter_seed=3)],
@@ -356,11 +371,10 @@ def test_unlit_composite_scene_builds_only_what_it_uses():
         assert not {"u_phong", "u_gradient_epsilon", "t_jitter", "t_occupancy", "t_cell_valid"} & set(prog)
         assert "#define MODE_COMPOSITE 1" in fs
         r.render(scene, skip_empty=True, jitter_seed=1)
-        # skipping adds the brick occupancy and the pass that finds each ray's occupied range
-        assert sorted(k for k, _ in r.created) == ["jitter", "occupancy", "occupied_faces", "occupied_range",
-                                                   "step_tf", "target", "tf", "volume"]
+        # skipping adds the brick occupancy (every brick is occupied here: no range pass)
+        assert sorted(k for k, _ in r.created) == ["jitter", "occupancy", "step_tf", "target", "tf", "volume"]
         r.render(scene, skip_empty=True, jitter_seed=1)  # a second frame makes nothing new
-        assert len(r.created) == 8
+        assert len(r.created) == 6
         iso = scene.replace(mode="isosurface", iso_value=40.0)
         r.render(iso)
         iso_prog = [p for (v, f, d), p in r.programs._programs.items() if ("MODE_ISOSURFACE", 1) in d][0]

@@ -423,10 +423,11 @@ def occupied_range(renderer, plan):
     """The pixels' (least entry, -greatest exit) into the occupied bricks' grown boxes
     along their rays (``occupied_faces``, blended with MIN), as an RG32F texture the
     size of the plan's target (3e38 in both where the ray meets none); None where the
-    pass does not apply (no skipping, or the eye inside or nearly on the box)."""
+    pass does not apply (no skipping, no empty brick, or the eye inside or nearly on the
+    box)."""
     occupied = plan.occupancy if plan.occupancy is not None else plan.bricks
     scene = plan.scene
-    if occupied is None:
+    if occupied is None or occupied.all():      # every ray's range is then the box's own
         return None
     ctx = renderer.ctx
     volume = scene.volume
