@@ -453,15 +453,14 @@ def occupied_range(renderer, plan):
     fbo.use()
     fbo.clear(3e38, 3e38, 0.0, 0.0)
     if mesh is not None:
-        vertices = mesh.size // 24
-        vao = ctx.vertex_array(prog, [(mesh, "3f 3f", "a_position", "a_normal")])
+        vao = renderer.resource("occupied_faces_vao", mesh, prog, make=lambda: ctx.vertex_array(
+            prog, [(mesh, "3f 3f", "a_position", "a_normal")]))
         ctx.disable(ctx.DEPTH_TEST | ctx.CULL_FACE)
         ctx.enable(ctx.BLEND)
         ctx.blend_equation = ctx.MIN
-        vao.render(vertices=vertices)
+        vao.render(vertices=mesh.size // 24)
         ctx.blend_equation = ctx.FUNC_ADD
         ctx.disable(ctx.BLEND)
-        vao.release()
     return fbo.color_attachments[0]
 
 

@@ -305,8 +305,8 @@ void main() {
         // The field may leave the straight line between the ends by the gradient bound
         // times the distance: if the values it can reach touch a bend of the TF's opacity
         // (a narrow feature), the segment is split into u_refine parts, each sampled and
-        // read from the table of their length; a loop, so that groups of pixels none of
-        // which refines skip it.
+        // read from the table of their length. (llvmpipe runs the parts' loop body once
+        // even where no pixel refines: the README measures what that costs.)
         float mid = 0.5 * (s_front + s_back);
         ivec3 block = clamp(ivec3(floor(p / u_spacing / u_reach_block)), ivec3(0), textureSize(t_reach, 0) - 1);
         float reach = 0.5 * max(texelFetch(t_reach, block, 0).r * len, abs(s_back - s_front));
@@ -350,12 +350,12 @@ void main() {
   #endif
   #if SKIP_EMPTY
         if (segment.a <= 0.0) {
-            int k_last = lastSegmentInEmptyBrick(p, origin, dir, t0, jitter, k);
-            if (k_last > k) {
+            int k_skip = lastSegmentInEmptyBrick(p, origin, dir, t0, jitter, k);
+            if (k_skip > k) {
       #if MASK_NONFINITE
-                k = k_last;
+                k = k_skip;
       #else
-                k = k_last - 1;   // segment k_last, inside the empty brick, reads the front
+                k = k_skip - 1;   // segment k_skip, inside the empty brick, reads the front
       #endif
                 have_front = false;
             }
