@@ -265,6 +265,12 @@ def test_info_lists_every_backend(capsys):
         assert f"\n{name}: ok" in out or f"\n{name}: failed" in out
     if code == 0:
         assert "renderer" in out and "max_3d_texture_size" in out and "version" in out
+    # each working backend describes a real context (an EGL context queried while not
+    # current answered empty strings and zero limits)
+    for block in out.split("\n")[1:]:
+        if block.strip().startswith(("renderer:", "max_texture_size:")):
+            value = block.split(":", 1)[1].strip()
+            assert value not in ("", "0", "None"), block
 
 
 def test_info_reports_failures(capsys, monkeypatch):

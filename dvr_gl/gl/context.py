@@ -266,8 +266,11 @@ def idle_framebuffer(ctx):
 
 
 def describe(ctx) -> dict:
-    """Renderer strings, GL version and the limits dvr_gl cares about."""
-    info = ctx.info
+    """Renderer strings, GL version and the limits dvr_gl cares about. The context is made
+    current first: an EGL context is not current after it is made, and GL answers queries
+    on no context with empty strings and zeros."""
+    with current(ctx):
+        info = ctx.info
     return {
         "vendor": info.get("GL_VENDOR"),
         "renderer": info.get("GL_RENDERER"),
