@@ -185,7 +185,18 @@ def _volume_uniforms(v):
     return {"u_dims": tuple(float(n) for n in v.dims), "u_spacing": tuple(v.spacing)}
 
 
-def test_sample_volume_is_trilinear(ctx, renderer, small_volume):
+def _filter_path(ctx, texture_filter):
+    """Both ways of interpolating textures: texel fetches in the shader (GPUs, whose filter
+    weights are quantised), and the texture unit where the context's probe finds its
+    weights exact (llvmpipe), as the program cache sets it."""
+    from dvr_gl.gl.programs import linear_filter_is_exact
+    if texture_filter and not linear_filter_is_exact(ctx):
+        pytest.skip("this context's filter weights are quantised; the cache never sets the switch here")
+    return {"TEXTURE_FILTER_EXACT": texture_filter}
+
+
+@pytest.mark.parametrize("texture_filter", [0, 1])
+def test_sample_volume_is_trilinear(ctx, renderer, small_volume, texture_filter):
     v = small_volume
     rng = np.random.default_rng(4)
     p = rng.uniform(-0.5, 1.5, (500, 3)) * v.extent  # inside and outside (clamped)
@@ -193,24 +204,26 @@ def test_sample_volume_is_trilinear(ctx, renderer, small_volume):
     p32 = p.astype(np.float32)
     gl = harness.evaluate(ctx, ["common/sampling.glsl"], "out0 = vec4(sampleVolume(in0.xyz));",
                           [np.c_[p32, np.zeros(500)]], textures={"t_volume": _made(renderer, renderer.volume_texture, v)},
-                          uniforms=_volume_uniforms(v))[:, 0]
+                          uniforms=_volume_uniforms(v), defines=_filter_path(ctx, texture_filter))[:, 0]
     ref = common.trilinear(v.values(), p32.astype(np.float64) / v.spacing)
     # llvmpipe filters float textures in float32: the texel position n*tc - 0.5 carries
-    # ~n * 2u of absolute error (n <= 7 here), times the largest jump between neighbours (25)
+    # ~n * 2u of absolute error (n <= 7 here), times the largest jump between neighbours (25);
+    # the fetch path's p / spacing carries less. An 8-bit weight would err by up to 25/512.
     np.testing.assert_allclose(gl, ref, rtol=0, atol=7 * 4 * U32 * 25 + 8 * U32 * 20)
     corner_values = [v.values()[-1 if z else 0, -1 if y else 0, -1 if x else 0]
                      for x in (0, 1) for y in (0, 1) for z in (0, 1)]
     np.testing.assert_allclose(gl[:8], corner_values, atol=1e-5)  # texel centres are the samples
 
 
-def test_gradient_central_differences(ctx, renderer, small_volume):
+@pytest.mark.parametrize("texture_filter", [0, 1])
+def test_gradient_central_differences(ctx, renderer, small_volume, texture_filter):
     v = small_volume
     rng = np.random.default_rng(5)
     p = rng.uniform(-0.1, 1.1, (300, 3)) * v.extent
     p32 = p.astype(np.float32)
     gl = harness.evaluate(ctx, ["common/shading.glsl"], "out0 = vec4(gradient(in0.xyz), 0.0);",
                           [np.c_[p32, np.zeros(300)]], textures={"t_volume": _made(renderer, renderer.volume_texture, v)},
-                          uniforms=_volume_uniforms(v))[:, :3]
+                          uniforms=_volume_uniforms(v), defines=_filter_path(ctx, texture_filter))[:, :3]
     ref = gradient(v, v.values(), p32.astype(np.float64) + v.origin)
     # each difference of two samples (error as above, ~1e-4) over 2 * spacing (>= 1)
     np.testing.assert_allclose(gl, ref, rtol=0, atol=2e-4)
@@ -263,3 +276,47 @@ def test_refine_iso_bisection(ctx, renderer, small_volume):
     assert np.all(np.abs(gl - ref) <= 0.6 / 2 ** 15 + 1e-6) or np.all(
         np.abs(sample(gl.astype(np.float64)) - iso) < 1e-2)
     assert np.all(np.abs(sample(ref) - iso) < 25 * 0.6 / 2 ** 16 * 4)
+
+
+@pytest.mark.parametrize("technique, options", [
+    ("raycast", {"step": 0.4}),
+    ("raycast", {"step": 0.4, "shading": True}),
+    ("raycast", {"step": 0.4, "shading": True, "gradients": "texture"}),
+    ("raycast", {"step": 0.4, "mode": "mip"}),
+    ("slice3d", {"step": 0.5}),
+    ("slice2d", {"interpolate": 1}),
+    ("slice2d", {"shading": True}),
+])
+def test_both_filter_paths_render_the_same_image(technique, options):
+    """Texel fetches interpolated in the shader (what a GPU with quantised filter weights
+    runs) and the texture unit's filter (llvmpipe) give the same images, to float
+    rounding: every technique that reads the volume, its gradients or its stacks."""
+    exact_here = linear_filter_probe()
+    options = dict(options)
+    shading, mode = options.pop("shading", False), options.pop("mode", "composite")
+    volume = dvr_gl.Volume(np.random.default_rng(3).random((9, 10, 11)).astype(np.float32) ** 2,
+                           spacing=(1.0, 0.8, 1.2))
+    tf = dvr_gl.TransferFunction(color=[(0.0, 0.2, 0.4, 1.0), (0.5, 1.0, 0.5, 0.2), (1.0, 1.0, 1.0, 1.0)],
+                                 opacity=[(0.0, 0.0), (0.3, 0.1), (0.6, 0.8), (1.0, 0.4)], unit_distance=1.0)
+    scene = dvr_gl.Scene(volume, tf, dvr_gl.default_camera(volume, azimuth=30, elevation=20), 24, 20,
+                         shading=shading, mode=mode)
+    images = {}
+    for texture_filter in ((0, 1) if exact_here else (0,)):
+        with dvr_gl.Renderer() as r:
+            r.programs._context_defines = {"TEXTURE_FILTER_EXACT": texture_filter}
+            images[texture_filter] = r.render(scene, technique=technique, **options)
+    assert images[0][..., 3].max() > 0.2
+    if exact_here:
+        # both are float32 trilinear interpolation of the same texels (position rounding
+        # a few 1e-7 of a texel, times neighbour jumps <= 1), through at most ~40 samples
+        assert np.abs(images[0] - images[1]).max() <= 2e-5
+    else:  # a GPU: the fetch path is what every program gets
+        with dvr_gl.Renderer() as r:
+            assert r.programs.context_defines == {"TEXTURE_FILTER_EXACT": 0}
+            assert np.abs(r.render(scene, technique=technique, **options) - images[0]).max() == 0.0
+
+
+def linear_filter_probe():
+    from dvr_gl.gl.context import shared_context
+    from dvr_gl.gl.programs import linear_filter_is_exact
+    return linear_filter_is_exact(shared_context()[0])

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 import dvr_gl
+from conftest import rounds_to_nearest
 from dvr_gl import metrics, reference
 from dvr_gl.techniques import get_technique, slice2d, slice3d
 
@@ -262,7 +263,10 @@ def test_targets_under_hundreds_of_slices(renderer, target, technique, opts):
     scene = dvr_gl.Scene(VOLUME, TF, cameras(VOLUME)["perspective"], width=W, height=H)
     gl, ref, plan = render_both(renderer, scene, technique, target=target, **opts)
     assert plan.count >= 300
-    assert metrics.max_abs_error(gl, ref) <= TARGET_ULP[target] + slice_tolerance(plan)
+    # where a blend may round to either neighbour (GL's rule; conftest.rounds_to_nearest),
+    # each of a pixel's blends can add a unit (blending over never grows an earlier error)
+    units = 1 if rounds_to_nearest(renderer) else plan.count
+    assert metrics.max_abs_error(gl, ref) <= units * TARGET_ULP[target] + slice_tolerance(plan)
     exact = reference.exact(scene)
     float_error = metrics.rmse(reference.render(scene, technique=technique, **opts), exact)
     if target == "rgba32f":

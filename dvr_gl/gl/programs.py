@@ -140,10 +140,12 @@ class ProgramCache:
 
     @property
     def context_defines(self):
-        """Switches that follow from the context, probed once: ``PREINT_TEXTURE_FILTER``
-        (common/preintegration.glsl), 1 where the texture unit's filter is exact."""
+        """Switches that follow from the context, probed once: ``TEXTURE_FILTER_EXACT``
+        (common/sampling.glsl, common/preintegration.glsl), 1 where the texture unit's
+        linear filter is exact; else volumes, gradients, stacks and pre-integration tables
+        are interpolated in the shader from texel fetches."""
         if self._context_defines is None:
-            self._context_defines = {"PREINT_TEXTURE_FILTER": int(linear_filter_is_exact(self.ctx))}
+            self._context_defines = {"TEXTURE_FILTER_EXACT": int(linear_filter_is_exact(self.ctx))}
         return self._context_defines
 
     def get(self, vertex: str, fragment: str, defines: dict | None = None, geometry: str | None = None):

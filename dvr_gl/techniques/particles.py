@@ -39,6 +39,7 @@ import numpy as np
 
 from .. import particles as pbvr
 from ..cache import TableCache
+from ..gl.context import current
 from ..progress import Progress
 from ..scene import Scene
 from .common import (cleared_target, SizedTarget, bind, camera_uniforms, check_scene, check_target, data_projection,
@@ -137,6 +138,13 @@ def pixels_per_unit(scene):
     return scene.height / (2.0 * scene.camera.screen_scale(scene.width, scene.height)[1])
 
 
+def point_size_step(ctx):
+    """GL_POINT_SIZE_GRANULARITY: a GPU may round a point's size to a multiple of it (one
+    measured here lost pixel centres at sprite edges), so sprites are that much larger."""
+    with current(ctx):
+        return float(ctx.info.get("GL_POINT_SIZE_GRANULARITY") or 0.0)
+
+
 def draw(renderer, plan):
     """Render the plan into the renderer's target; returns that framebuffer."""
     ctx = renderer.ctx
@@ -149,7 +157,7 @@ def draw(renderer, plan):
     prog = renderer.programs.get("particles/particles.vert", "particles/particles.frag", plan.defines)
     average = renderer.programs.get("tetra/fullscreen.vert", "particles/average.frag")
     uniforms = {**camera_uniforms(scene), "u_radius": plan.radius, "u_pixels_per_unit": pixels_per_unit(scene),
-                "u_inv_far": 1.0 / far_distance(scene)}
+                "u_inv_far": 1.0 / far_distance(scene), "u_size_step": point_size_step(ctx)}
     if scene.shading:
         uniforms.update(sample_term_uniforms(renderer, scene, plan.defines))
     bind(prog, {}, uniforms)

@@ -9,6 +9,9 @@
 #ifndef ORTHO
 #define ORTHO 0
 #endif
+#ifndef PRECISE
+#define PRECISE   // common/precise.glsl, where a shader includes it first
+#endif
 
 uniform vec2 u_viewport;      // image width, height in pixels (the whole image)
 uniform vec2 u_tile_origin;   // where this render's target sits in the image (GL window
@@ -29,14 +32,16 @@ void pixelRay(out vec3 origin, out vec3 dir) {
     // (2 c - n) / n: the numerator is exact (pixel centres are half-integers), so the
     // middle row or column of an odd-sized image gets ndc exactly 0, as the NumPy twin's;
     // c * (2 / n) - 1 left it 1e-7 off, and a ray meant to lie in a face plane missed it
-    vec2 ndc = (2.0 * (gl_FragCoord.xy + u_tile_origin) - u_viewport) / u_viewport;
-    vec3 offset = (ndc.x * u_screen.x) * u_right + (ndc.y * u_screen.y) * u_up;
+    PRECISE vec2 ndc = (2.0 * (gl_FragCoord.xy + u_tile_origin) - u_viewport) / u_viewport;
+    PRECISE vec3 offset = (ndc.x * u_screen.x) * u_right + (ndc.y * u_screen.y) * u_up;
 #if ORTHO
-    origin = u_eye + offset;
+    PRECISE vec3 start = u_eye + offset;
+    origin = start;
     dir = u_forward;
 #else
+    PRECISE vec3 unit = normalize(u_forward + offset);
     origin = u_eye;
-    dir = normalize(u_forward + offset);
+    dir = unit;
 #endif
 }
 

@@ -19,16 +19,16 @@ uniform float u_pi_length;    // the nominal length of the table in rows 0 .. 2 
 uniform vec2 u_pi_cut;        // 1 where the table stops at the TF's last opacity on that side
                               // (below node 0, above the last): values beyond are empty
 
-#ifndef PREINT_TEXTURE_FILTER
-#define PREINT_TEXTURE_FILTER 0   // 1: the texture unit interpolates the table (set by the
-#endif                            // program cache where its weights are exact, as on llvmpipe)
+#ifndef TEXTURE_FILTER_EXACT
+#define TEXTURE_FILTER_EXACT 0   // 1: the texture unit interpolates the table (set by the
+#endif                           // program cache where its weights are exact, as on llvmpipe)
 
 // The table's bilinear interpolant at node coordinates (back, front) of the rows from
 // first_row (the front index counts from there), in full float precision: by the texture
 // unit where its filter weights are exact (one read instead of four texel fetches),
 // else here.
 vec4 tableAt(float ub, float uf, int first_row) {
-#if PREINT_TEXTURE_FILTER
+#if TEXTURE_FILTER_EXACT
     return texture(t_preint, (vec2(ub, uf + float(first_row)) + 0.5) / vec2(textureSize(t_preint, 0)));
 #else
     int b0 = min(int(floor(ub)), u_pi_size - 2);

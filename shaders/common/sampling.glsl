@@ -6,6 +6,10 @@
 #ifndef MASK_NONFINITE
 #define MASK_NONFINITE 0
 #endif
+#ifndef TEXTURE_FILTER_EXACT
+#define TEXTURE_FILTER_EXACT 0   // 1: the texture unit's linear filter has float weights (set
+                                 // per context by the program cache); 0: interpolate fetches
+#endif
 
 uniform sampler3D t_volume;   // float32 samples in data units; texel centres are samples
 uniform vec3 u_dims;          // samples per axis (nx, ny, nz)
@@ -19,8 +23,48 @@ vec3 worldToTex(vec3 p_world) {
     return (p_world / u_spacing + 0.5) / u_dims;
 }
 
+// Trilinear interpolation from texel fetches, x in texel units (centres at integers),
+// clamped to the edge as the texture unit would. GPUs commonly quantise the filter's
+// weights to 8 bits, an error of up to 1/512 of the jump between neighbouring samples
+// per axis; llvmpipe's weights are float and its texture() is used instead.
+vec4 fetchTrilinear(sampler3D t, vec3 x) {
+    ivec3 last = textureSize(t, 0) - 1;
+    vec3 xc = clamp(x, vec3(0.0), vec3(last));
+    vec3 lo = floor(xc);
+    vec3 f = xc - lo;
+    ivec3 a = ivec3(lo);
+    ivec3 b = min(a + 1, last);
+    vec4 x00 = mix(texelFetch(t, a, 0), texelFetch(t, ivec3(b.x, a.y, a.z), 0), f.x);
+    vec4 x10 = mix(texelFetch(t, ivec3(a.x, b.y, a.z), 0), texelFetch(t, ivec3(b.x, b.y, a.z), 0), f.x);
+    vec4 x01 = mix(texelFetch(t, ivec3(a.x, a.y, b.z), 0), texelFetch(t, ivec3(b.x, a.y, b.z), 0), f.x);
+    vec4 x11 = mix(texelFetch(t, ivec3(a.x, b.y, b.z), 0), texelFetch(t, b, 0), f.x);
+    return mix(mix(x00, x10, f.y), mix(x01, x11, f.y), f.z);
+}
+
+// The same in a layer of a 2D array texture (2D slicing's stacks), x in texel units.
+vec4 fetchBilinear(sampler2DArray t, vec2 x, int layer) {
+    ivec2 last = textureSize(t, 0).xy - 1;
+    vec2 xc = clamp(x, vec2(0.0), vec2(last));
+    vec2 lo = floor(xc);
+    vec2 f = xc - lo;
+    ivec2 a = ivec2(lo);
+    ivec2 b = min(a + 1, last);
+    vec4 y0 = mix(texelFetch(t, ivec3(a, layer), 0), texelFetch(t, ivec3(b.x, a.y, layer), 0), f.x);
+    vec4 y1 = mix(texelFetch(t, ivec3(a.x, b.y, layer), 0), texelFetch(t, ivec3(b, layer), 0), f.x);
+    return mix(y0, y1, f.y);
+}
+
+// A 3D texture whose texel centres are the samples, at a world point.
+vec4 filteredAt(sampler3D t, vec3 p_world) {
+#if TEXTURE_FILTER_EXACT
+    return texture(t, worldToTex(p_world));
+#else
+    return fetchTrilinear(t, p_world / u_spacing);
+#endif
+}
+
 float sampleVolume(vec3 p_world) {
-    return texture(t_volume, worldToTex(p_world)).r;
+    return filteredAt(t_volume, p_world).r;
 }
 
 #if MASK_NONFINITE

@@ -21,7 +21,7 @@ uniform sampler3D t_gradient;      // central differences at the samples, world 
 // gradient itself, boundary clamping included (see reference.shading.sample_gradients):
 // one fetch instead of six, the same value up to float32 storage.
 vec3 gradient(vec3 p_world) {
-    return texture(t_gradient, worldToTex(p_world)).xyz;
+    return filteredAt(t_gradient, p_world).xyz;
 }
 #else
 // Central differences one spacing apart per axis, in world units. Points outside the

@@ -50,18 +50,27 @@ bool sliceInside(int j, float t, vec3 origin, vec3 dir, float cos_theta) {
     return pu >= 0.0 && pu <= u_extent[u_axes.y] && pv >= 0.0 && pv <= u_extent[u_axes.z];
 }
 
+// Layer `layer` of the stack, bilinear at texel coordinates st (centres at integers): by
+// the texture unit where its weights are exact, else from fetches (common/sampling.glsl).
+float stackAt(vec2 st, int layer) {
+#if TEXTURE_FILTER_EXACT
+    return texture(t_stack, vec3((st + 0.5) / vec2(u_dims[u_axes.y], u_dims[u_axes.z]), float(layer))).r;
+#else
+    return fetchBilinear(t_stack, st, layer).r;
+#endif
+}
+
 // The field at slice j's point: bilinear in the layer, linear between two layers for an
 // intermediate slice.
 float sampleSlice(int j, float t, vec3 origin, vec3 dir) {
     vec3 p = origin + t * dir;
-    vec2 uv = (vec2(p[u_axes.y] / u_spacing[u_axes.y], p[u_axes.z] / u_spacing[u_axes.z]) + 0.5)
-              / vec2(u_dims[u_axes.y], u_dims[u_axes.z]);
+    vec2 st = vec2(p[u_axes.y] / u_spacing[u_axes.y], p[u_axes.z] / u_spacing[u_axes.z]);
     int layer = j / u_per_cell;
     int rest = j - layer * u_per_cell;
-    float s = texture(t_stack, vec3(uv, float(layer))).r;
+    float s = stackAt(st, layer);
     if (rest > 0) {
         float f = float(rest) / float(u_per_cell);
-        s = s * (1.0 - f) + texture(t_stack, vec3(uv, float(layer + 1))).r * f;
+        s = s * (1.0 - f) + stackAt(st, layer + 1) * f;
     }
     return s;
 }
@@ -69,13 +78,11 @@ float sampleSlice(int j, float t, vec3 origin, vec3 dir) {
 // The field at any point of the box, from the two layers around it (the partial slabs
 // at the box entry and exit are sampled at their midpoints this way).
 float sampleBetween(vec3 p) {
-    vec2 uv = (vec2(p[u_axes.y] / u_spacing[u_axes.y], p[u_axes.z] / u_spacing[u_axes.z]) + 0.5)
-              / vec2(u_dims[u_axes.y], u_dims[u_axes.z]);
+    vec2 st = vec2(p[u_axes.y] / u_spacing[u_axes.y], p[u_axes.z] / u_spacing[u_axes.z]);
     float x = clamp(p[u_axes.x] / u_spacing[u_axes.x], 0.0, u_dims[u_axes.x] - 1.0);
     float layer = min(floor(x), u_dims[u_axes.x] - 2.0);
     float f = x - layer;
-    float s = texture(t_stack, vec3(uv, layer)).r;
-    return s * (1.0 - f) + texture(t_stack, vec3(uv, layer + 1.0)).r * f;
+    return stackAt(st, int(layer)) * (1.0 - f) + stackAt(st, int(layer) + 1) * f;
 }
 
 #if SAMPLE_TERMS

@@ -5,6 +5,7 @@
 // vertex shader, which llvmpipe runs on one thread. Texel k of the first target holds
 // corners 0 and 1 of slot k (x, y, x, y), of the second corners 2 and 3.
 #version 330 core
+#include "common/precise.glsl"
 
 #include "common/texel_rows.glsl"
 
@@ -21,12 +22,17 @@ const float MITER_CAP = 1024.0;   // pixels
 layout(location = 0) out vec4 f_corners01;
 layout(location = 1) out vec4 f_corners23;
 
+// Both precise (common/precise.glsl): corners that project onto one line must give a
+// cross product of exactly 0, as they do unfused, or a face seen edge-on is not found
+// collinear and its outline does not grow.
 vec2 toWindow(vec4 clip) {
-    return (clip.xy / clip.w * 0.5 + 0.5) * u_target_size;
+    PRECISE vec2 window = (clip.xy / clip.w * 0.5 + 0.5) * u_target_size;
+    return window;
 }
 
 float cross2(vec2 a, vec2 b) {
-    return a.x * b.y - a.y * b.x;
+    PRECISE float area = a.x * b.y - a.y * b.x;
+    return area;
 }
 
 // Window-space move of corner a of the outline (convex hull) of a and the cell's three
@@ -73,10 +79,14 @@ void main() {
     if (slot >= u_slots) discard;
     int cell = texelFetch(t_order, texelRow(slot), 0).r;
     ivec4 corners = texelFetch(t_tets, texelRow(cell), 0);
-    vec2 w0 = toWindow(u_view_proj * vec4(texelFetch(t_points, texelRow(corners.x), 0).xyz, 1.0));
-    vec2 w1 = toWindow(u_view_proj * vec4(texelFetch(t_points, texelRow(corners.y), 0).xyz, 1.0));
-    vec2 w2 = toWindow(u_view_proj * vec4(texelFetch(t_points, texelRow(corners.z), 0).xyz, 1.0));
-    vec2 w3 = toWindow(u_view_proj * vec4(texelFetch(t_points, texelRow(corners.w), 0).xyz, 1.0));
+    PRECISE vec4 c0 = u_view_proj * vec4(texelFetch(t_points, texelRow(corners.x), 0).xyz, 1.0);
+    vec2 w0 = toWindow(c0);
+    PRECISE vec4 c1 = u_view_proj * vec4(texelFetch(t_points, texelRow(corners.y), 0).xyz, 1.0);
+    vec2 w1 = toWindow(c1);
+    PRECISE vec4 c2 = u_view_proj * vec4(texelFetch(t_points, texelRow(corners.z), 0).xyz, 1.0);
+    vec2 w2 = toWindow(c2);
+    PRECISE vec4 c3 = u_view_proj * vec4(texelFetch(t_points, texelRow(corners.w), 0).xyz, 1.0);
+    vec2 w3 = toWindow(c3);
     f_corners01 = vec4(w0 + outlineShift(w0, w1, w2, w3), w1 + outlineShift(w1, w2, w3, w0));
     f_corners23 = vec4(w2 + outlineShift(w2, w3, w0, w1), w3 + outlineShift(w3, w0, w1, w2));
 }

@@ -8,6 +8,7 @@
 // (the larger or smaller end value, or the segment's integral and length), and
 // tetra_classify.frag classifies the result.
 #version 330 core
+#include "common/precise.glsl"
 
 #ifndef ORTHO
 #define ORTHO 0
@@ -47,9 +48,9 @@ out vec4 frag_color;
 // Is the ray, moved towards the mesh's centre (across the ray; if that is no move at
 // all, by a fixed tiny offset), inside the plane with outward normal n that it lies in?
 bool movedInside(vec3 n, vec3 origin, vec3 dir) {
-    vec3 across = u_centre - origin;
+    PRECISE vec3 across = u_centre - origin;
     across -= dot(across, dir) * dir;
-    float towards = dot(n, across);
+    PRECISE float towards = dot(n, across);
     if (towards != 0.0) return towards < 0.0;
     return n.x != 0.0 ? n.x > 0.0 : n.y != 0.0 ? n.y > 0.0 : n.z > 0.0;
 }
@@ -57,10 +58,11 @@ bool movedInside(vec3 n, vec3 origin, vec3 dir) {
 void main() {
     vec3 origin, dir;
     pixelRay(origin, dir);
-    vec4 along = v_normals * dir;
+    // exact zeros stay exact zeros (common/precise.glsl): the ties below depend on it
+    PRECISE vec4 along = v_normals * dir;
 #if ORTHO
-    vec3 offset = origin - u_eye;             // orthographic rays start off the eye
-    vec4 room = v_room - v_normals * offset;
+    PRECISE vec3 offset = origin - u_eye;     // orthographic rays start off the eye
+    PRECISE vec4 room = v_room - v_normals * offset;
 #else
     vec3 offset = vec3(0.0);
     vec4 room = v_room;

@@ -17,6 +17,7 @@
 // near the eye) are drawn in their own draw calls (u_exact_faces) with their faces as
 // they are, the near plane clipped by GL.
 #version 330 core
+#include "common/precise.glsl"
 
 #include "common/texel_rows.glsl"
 
@@ -55,7 +56,8 @@ void main() {
     vec4 p2 = texelFetch(t_planes, texelRow(4 * cell + 2), 0);
     vec4 p3 = texelFetch(t_planes, texelRow(4 * cell + 3), 0);
     v_normals = mat3x4(vec4(p0.x, p1.x, p2.x, p3.x), vec4(p0.y, p1.y, p2.y, p3.y), vec4(p0.z, p1.z, p2.z, p3.z));
-    v_room = vec4(p0.w, p1.w, p2.w, p3.w) - v_normals * u_eye;
+    PRECISE vec4 room = vec4(p0.w, p1.w, p2.w, p3.w) - v_normals * u_eye;   // common/precise.glsl
+    v_room = room;
     vec4 field = texelFetch(t_field, texelRow(3 * cell), 0);
     vec3 centre = texelFetch(t_field, texelRow(3 * cell + 1), 0).xyz;
     v_range = texelFetch(t_field, texelRow(3 * cell + 2), 0).xy;
