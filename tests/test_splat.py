@@ -20,7 +20,11 @@ closest approach, whose float32 error is about eps * |q| (|q| the eye's distance
 splat), so the exponent m^2 (at most cutoff^2) is off by about 2 cutoff eps |q| / sigma
 and each splat's opacity relatively by as much; over the splats that reach a pixel
 (opacity adds up to at most 1) that bounds the pixel's error, and every blend adds a
-float32 rounding: bound = 2 cutoff eps |q|max / sigma_min + 1e-5.
+float32 rounding: bound = 2 cutoff eps |q|max / sigma_min + 1e-5. Where a ray passes
+within that rounding of a kernel's cutoff (8 eps |q|max / sigma_min standard deviations:
+the offset's few operations, a GPU's division at 2.5 ulp), GL may keep a kernel the
+reference drops or the reverse; such a pixel may differ by the opacity of those kernels
+(``reference.splat.cutoff_ambiguity``; a GPU did so at 2 of 147,456 pixels).
 """
 
 import math
@@ -32,6 +36,7 @@ import dvr_gl
 from dvr_gl import Camera, Scene, TransferFunction, Volume, metrics, reference
 from dvr_gl import data as bundled
 from dvr_gl.reference.common import box_rays, plane_inside, slab_segment
+from dvr_gl.reference.splat import cutoff_ambiguity
 from dvr_gl.techniques import proxy, splat
 
 from test_raycast import TF, VOLUME, blobs, cameras
@@ -79,15 +84,17 @@ def tent_tolerance(plan, position=True):
 
 
 def gaussian_tolerance(scene, plan):
+    """(H, W, 1): the float32 bound, plus the opacity of kernels within rounding of
+    their cutoff at each pixel."""
     lo, hi = scene.volume.bounds
     corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
     far = float(np.linalg.norm(corners - scene.camera.eye, axis=1).max())
-    return 2 * plan.cutoff * EPS32 * far / float(plan.sigma.min()) + 1e-5
+    rounding = EPS32 * far / float(plan.sigma.min())
+    return 2 * plan.cutoff * rounding + 1e-5 + cutoff_ambiguity(plan, 8 * rounding)[..., None]
 
 
 def bound(scene, plan):
-    """The bound on |GL - reference| of the plan's kernel: (H, W, 1) for the tent, one
-    number for the Gaussian."""
+    """The bound on |GL - reference| of the plan's kernel, (H, W, 1)."""
     return tent_tolerance(plan) if plan.kernel == "tent" else gaussian_tolerance(scene, plan)
 
 
@@ -527,4 +534,4 @@ def test_gaussian_sprites_larger_than_the_point_size_limit(renderer):
     img = renderer.render(scene, technique="splat")
     ref = dvr_gl.reference.render(scene, technique="splat")
     assert ref[..., 3].max() > 0.3
-    assert np.abs(img - ref).max() <= gaussian_tolerance(scene, plan)
+    assert np.all(np.abs(img - ref) <= gaussian_tolerance(scene, plan))

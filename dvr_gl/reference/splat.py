@@ -113,19 +113,18 @@ def _render_tent(plan, lut_exact):
     return acc.reshape(H, W, 4)
 
 
-def _render_gaussian(plan):
-    scene = plan.scene
-    W, H = scene.width, scene.height
+def _gaussian_pairs(plan):
+    """Every (pixel, splat) pair near each other, a chunk at a time: the pixels, the
+    splats' draw ranks, the rays' directions, their distance from each centre at closest
+    approach in standard deviations squared (m2), whether the centre is ahead (b < 0) and
+    the kernel's opacity along the ray (the shader's closed form)."""
     order = plan.order
     centres = plan.splats.points[order].astype(np.float64)
     samples = plan.splats.samples[order].astype(np.float64)
     scales = plan.splats.scales[order].astype(np.float64)
-    gradients = None if plan.gradients is None else plan.gradients[order].astype(np.float64)
     inv_var = 1.0 / plan.sigma ** 2
     u = plan.kernel_uniforms()
-    # draw position in the plan's order of each splat GL keeps
-    rank, origins, dirs, chunks = sprite_pixel_pairs(scene, centres, u["u_reach"] * scales)
-    pixels, ranks, alphas, colors = [], [], [], []
+    rank, origins, dirs, chunks = sprite_pixel_pairs(plan.scene, centres, u["u_reach"] * scales)
     for ids, pixel in chunks:
         q = origins[pixel] - centres[rank[ids]]
         d = dirs[pixel]
@@ -135,15 +134,38 @@ def _render_gaussian(plan):
         b = np.einsum("ij,ij->i", d * q, iv)
         off = q - (b / a)[:, None] * d
         m2 = np.einsum("ij,ij->i", off * off, iv)
-        hit = (b < 0) & (m2 <= u["u_cutoff2"])
         od = samples[rank[ids], 3] * u["u_norm"] / scale ** 3 / np.sqrt(a) * np.exp(-0.5 * m2)
-        alpha = -np.expm1(-od)
+        yield pixel, rank[ids], d, m2, b < 0, -np.expm1(-od)
+
+
+def cutoff_ambiguity(plan, band):
+    """(H, W): per pixel the summed opacity of the Gaussian splats whose ray passes within
+    ``band`` standard deviations of the kernel's cutoff. Float32 rounding may keep or drop
+    those kernels (GPUs' arithmetic does, at a few pixels), and over compositing changes
+    a pixel by at most the opacity it keeps or drops."""
+    scene = plan.scene
+    out = np.zeros(scene.width * scene.height)
+    for pixel, _, _, m2, ahead, alpha in _gaussian_pairs(plan):
+        near = ahead & (np.abs(np.sqrt(m2) - plan.cutoff) <= band)
+        np.add.at(out, pixel[near], alpha[near])
+    return out.reshape(scene.height, scene.width)
+
+
+def _render_gaussian(plan):
+    scene = plan.scene
+    W, H = scene.width, scene.height
+    samples = plan.splats.samples[plan.order].astype(np.float64)
+    gradients = None if plan.gradients is None else plan.gradients[plan.order].astype(np.float64)
+    cutoff2 = plan.kernel_uniforms()["u_cutoff2"]
+    pixels, ranks, alphas, colors = [], [], [], []
+    for pixel, rank, d, m2, ahead, alpha in _gaussian_pairs(plan):
+        hit = ahead & (m2 <= cutoff2)
         pixels.append(pixel[hit])
-        ranks.append(rank[ids][hit])
+        ranks.append(rank[hit])
         alphas.append(alpha[hit])
-        rgb = samples[rank[ids][hit], :3]
+        rgb = samples[rank[hit], :3]
         if gradients is not None:          # lit along each pixel's own ray
-            rgb = lit_colors(scene, rgb, gradients[rank[ids][hit]], d[hit])
+            rgb = lit_colors(scene, rgb, gradients[rank[hit]], d[hit])
         colors.append(rgb * alpha[hit, None])
     out = np.zeros((H * W, 4))
     if not pixels:
