@@ -49,11 +49,11 @@ SAFETY = 0.7
 MIN_STEP, MAX_STEP = 1.0 / 64.0, 2.0     # in voxels (the smallest spacing)
 PILOT_STEPS = (1.0, 0.5, 0.25, 0.125)    # voxels
 VERIFY_ROUNDS = 3                        # pilot frames at chosen steps, at most
-# a pre-integrated step's cost over a plain one's (measured 1.46x to 1.62x at 512x512 on
+# a pre-integrated step's cost over a plain one's (measured 1.71x to 1.87x at 512x512 on
 # the CT head, chest CT, narrow spike and Marschner-Lobb at one voxel, skipping off for
-# it), and a refined one's at least: a way whose step is dearer by this estimate than 4x
-# the cheapest is not timed
-PREINTEGRATION_COST = 1.6
+# it, since plain steps go four to a loop iteration), and a refined one's at least: a way
+# whose step is dearer by this estimate than 4x the cheapest is not timed
+PREINTEGRATION_COST = 1.8
 REFINE_PARTS = 4                         # parts of a refined pre-integrated segment
 TIMING_SIDE = 256
 TIMING_REPEATS = 5

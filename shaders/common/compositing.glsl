@@ -59,6 +59,12 @@ void compositeFrontToBack(inout vec3 color, inout float alpha_acc, vec3 rgb, flo
     alpha_acc += weight;
 }
 
+// The same for a premultiplied piece (a segment's colour integral and opacity).
+void compositePremultiplied(inout vec3 color, inout float alpha_acc, vec4 piece) {
+    color += (1.0 - alpha_acc) * piece.rgb;
+    alpha_acc += (1.0 - alpha_acc) * piece.a;
+}
+
 // The over operator on premultiplied colours: `front` seen in front of `back` (the
 // blending the slicing techniques ask of GL, done in the shader).
 vec4 over(vec4 front, vec4 back) {

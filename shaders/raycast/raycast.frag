@@ -153,6 +153,19 @@ int skipEmptyBrick(vec3 p, vec3 origin, vec3 dir, float t0, float jitter, int k)
 #endif
 
 #if STEP_TABLE
+// Full segment k's midpoint: from k, never accumulated, so a skip cannot move a sample.
+vec3 segmentMidpoint(vec3 origin, vec3 dir, float t0, float jitter, int k) {
+    return origin + (t0 + (jitter + float(k) + 0.5) * u_step) * dir;
+}
+
+// A full segment's corrected, premultiplied piece from the step table (0 in a masked cell).
+vec4 fullSegment(vec3 p) {
+  #if MASK_NONFINITE
+    if (!insideValidCell(p)) return vec4(0.0);
+  #endif
+    return lookupStepTF(sampleVolume(p));
+}
+
 // A partial segment [a, b] of the ray (the first, jittered one or the last, shorter one),
 // its opacity corrected for its own length, composited front to back.
 void compositePartial(vec3 origin, vec3 dir, float a, float b, inout vec3 color, inout float alpha_acc) {
@@ -165,9 +178,7 @@ void compositePartial(vec3 origin, vec3 dir, float a, float b, inout vec3 color,
     float s = sampleVolume(p);
     vec4 rgba = applyTF(s);
     if (rgba.a <= 0.0) return;
-    vec4 piece = sampleSegmentOf(rgba, s, len * u_inv_unit, p, dir);
-    color += (1.0 - alpha_acc) * piece.rgb;
-    alpha_acc += (1.0 - alpha_acc) * piece.a;
+    compositePremultiplied(color, alpha_acc, sampleSegmentOf(rgba, s, len * u_inv_unit, p, dir));
 }
 #endif
 
@@ -237,22 +248,31 @@ void main() {
     k_first = int(clamp(floor((t_enter - t0) / u_step - jitter - 0.5), 0.0, float(n_full)));
     k_stop = int(clamp(ceil((t_leave - t0) / u_step - jitter - 0.5) + 1.0, 0.0, float(n_full)));
   #endif
-    for (int k = k_first; k < k_stop && k < u_max_segments; ++k) {
-        vec3 p = origin + (t0 + (jitter + float(k) + 0.5) * u_step) * dir;
-  #if MASK_NONFINITE
-        if (!insideValidCell(p)) continue;
-  #endif
-        float s = sampleVolume(p);
-        vec4 piece = lookupStepTF(s);
-        if (piece.a <= 0.0) {
+    // Four segments per iteration: llvmpipe pays the loop's bookkeeping (its exit tests,
+    // the breaks' masks) once per iteration, so a group of four cost 0.76x to 0.94x the
+    // time of four iterations (README). A segment past the last reads as empty; a ray
+    // may composite up to three segments past its termination (closer to exact).
+    int k_end = min(k_stop, u_max_segments);
+    for (int k = k_first; k < k_end; k += 4) {
+        vec3 p0 = segmentMidpoint(origin, dir, t0, jitter, k);
+        vec3 p1 = segmentMidpoint(origin, dir, t0, jitter, k + 1);
+        vec3 p2 = segmentMidpoint(origin, dir, t0, jitter, k + 2);
+        vec3 p3 = segmentMidpoint(origin, dir, t0, jitter, k + 3);
+        vec4 piece0 = fullSegment(p0);
+        vec4 piece1 = k + 1 < k_end ? fullSegment(p1) : vec4(0.0);
+        vec4 piece2 = k + 2 < k_end ? fullSegment(p2) : vec4(0.0);
+        vec4 piece3 = k + 3 < k_end ? fullSegment(p3) : vec4(0.0);
+        if (max(max(piece0.a, piece1.a), max(piece2.a, piece3.a)) <= 0.0) {
   #if SKIP_EMPTY && !PREINTEGRATE
-            k = skipEmptyBrick(p, origin, dir, t0, jitter, k);
+            // from the group's last segment, as one at a time would from each
+            k = skipEmptyBrick(p3, origin, dir, t0, jitter, k + 3) - 3;
   #endif
             continue;
         }
-        piece = litSegment(piece, p, dir);
-        color += (1.0 - alpha_acc) * piece.rgb;
-        alpha_acc += (1.0 - alpha_acc) * piece.a;
+        compositePremultiplied(color, alpha_acc, litSegment(piece0, p0, dir));
+        compositePremultiplied(color, alpha_acc, litSegment(piece1, p1, dir));
+        compositePremultiplied(color, alpha_acc, litSegment(piece2, p2, dir));
+        compositePremultiplied(color, alpha_acc, litSegment(piece3, p3, dir));
   #if EARLY_RAY_TERMINATION
         if (1.0 - alpha_acc < u_ert_transmittance) { ended = true; break; }
   #endif
@@ -362,8 +382,7 @@ void main() {
             continue;
         }
   #endif
-        color += (1.0 - alpha_acc) * segment.rgb;
-        alpha_acc += (1.0 - alpha_acc) * segment.a;
+        compositePremultiplied(color, alpha_acc, segment);
   #if EARLY_RAY_TERMINATION
         if (1.0 - alpha_acc < u_ert_transmittance) break;
   #endif
@@ -387,9 +406,7 @@ void main() {
   #endif
             continue;
         }
-        vec4 piece = sampleSegmentOf(rgba, s, len * u_inv_unit, p, dir);
-        color += (1.0 - alpha_acc) * piece.rgb;
-        alpha_acc += (1.0 - alpha_acc) * piece.a;
+        compositePremultiplied(color, alpha_acc, sampleSegmentOf(rgba, s, len * u_inv_unit, p, dir));
   #if EARLY_RAY_TERMINATION
         if (1.0 - alpha_acc < u_ert_transmittance) break;
   #endif
