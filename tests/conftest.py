@@ -67,10 +67,10 @@ def pytest_sessionfinish(session, exitstatus):
 
 
 def rounds_to_nearest(renderer):
-    """Whether the renderer's low-precision writes and blends round to nearest. GL only
-    says a conversion gives one of the two nearest representable values (and should round
-    to nearest); llvmpipe does round to nearest (measured, what the tight bounds assume).
-    A GPU measured here did not always: elsewhere a bound takes the spec's one unit per
-    rounding."""
+    """Whether the renderer's writes and blends to 8-bit targets round to nearest. GL
+    only says a conversion gives one of the two nearest representable values (and should
+    round to nearest); llvmpipe does round to nearest (measured, what the tight bounds
+    assume; its half floats truncate, which those bounds already allow). A GPU measured
+    here did not always: elsewhere a bound takes the spec's one unit per rounding."""
     with current(renderer.ctx):
         return "llvmpipe" in (renderer.ctx.info.get("GL_RENDERER") or "")
