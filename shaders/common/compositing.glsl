@@ -59,16 +59,18 @@ void compositeFrontToBack(inout vec3 color, inout float alpha_acc, vec3 rgb, flo
     alpha_acc += weight;
 }
 
-// The same for a premultiplied piece (a segment's colour integral and opacity).
-void compositePremultiplied(inout vec3 color, inout float alpha_acc, vec4 piece) {
-    color += (1.0 - alpha_acc) * piece.rgb;
-    alpha_acc += (1.0 - alpha_acc) * piece.a;
-}
-
 // The over operator on premultiplied colours: `front` seen in front of `back` (the
 // blending the slicing techniques ask of GL, done in the shader).
 vec4 over(vec4 front, vec4 back) {
     return front + (1.0 - front.a) * back;
+}
+
+// A ray's gathered colour and opacity with a premultiplied piece (a segment's colour
+// integral and opacity) behind them.
+void compositePremultiplied(inout vec3 color, inout float alpha_acc, vec4 piece) {
+    vec4 gathered = over(vec4(color, alpha_acc), piece);
+    color = gathered.rgb;
+    alpha_acc = gathered.a;
 }
 
 #endif
