@@ -1,7 +1,8 @@
 """dvr_gl asked for VTK's error, beside VTK: for each scene and VTK step (1, 1/2 and 1/4
 voxel), VTK's GPU ray caster's frame time and RMSE against the exact image, then
-``Renderer.render(scene, tolerance=that RMSE)``'s frame time and achieved RMSE, timed in
-the same run, frames interleaved. Writes a Markdown table.
+``Renderer.render(scene, tolerance=that RMSE)``'s frame time and achieved RMSE, and the
+adaptive mode's (refined pre-integration, ``refine=REFINE_PARTS``) at VTK's own step,
+timed in the same run, frames interleaved. Writes a Markdown table.
 
     LP_NUM_THREADS=2 python apps/tolerance_vs_vtk.py [--out docs/tolerance_vs_vtk.md]
 """
@@ -18,6 +19,7 @@ from dvr_gl.bench import datasets, interleaved_frames, oblique_camera
 from dvr_gl.phantoms import marschner_lobb, marschner_lobb_tf
 from dvr_gl.io import atomic_write
 from dvr_gl.progress import Progress
+from dvr_gl.tolerance import REFINE_PARTS
 from dvr_gl.vtk_peer import VTKPeer
 
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -80,11 +82,15 @@ def main(argv=None):
                     vtk_rmse = metrics.rmse(peer.frame(), exact)
                     got = metrics.rmse(gl.render(small, tolerance=vtk_rmse), exact)
                     choice = gl.last_choice
+                    adaptive = dict(step=step, preintegrate=True, refine=REFINE_PARTS)
+                    got_adaptive = metrics.rmse(gl.render(small, **adaptive), exact)
                     peer.setup(big, step)
-                    _, (t_vtk, t_gl) = interleaved_frames(
-                        [peer.frame, lambda: gl.render(big, tolerance=vtk_rmse)], args.repeats)
+                    _, (t_vtk, t_gl, t_adaptive) = interleaved_frames(
+                        [peer.frame, lambda: gl.render(big, tolerance=vtk_rmse), lambda: gl.render(big, **adaptive)],
+                        args.repeats)
                     rows.append((name, k, statistics.median(t_vtk) * 1e3, vtk_rmse, sampling(choice),
-                                 statistics.median(t_gl) * 1e3, got))
+                                 statistics.median(t_gl) * 1e3, got, statistics.median(t_adaptive) * 1e3,
+                                 got_adaptive))
                     progress.advance(f"{name}: VTK step {k:g}")
                 for target_name, target in TARGETS:
                     if target_name != name:
@@ -104,15 +110,22 @@ def main(argv=None):
              f"`LP_NUM_THREADS={os.environ.get('LP_NUM_THREADS', 'unset')} python apps/tolerance_vs_vtk.py` "
              f"({args.size}x{args.size} frames, median of {args.repeats} taken round robin; RMSE against "
              f"`reference.exact` at {args.error_size}x{args.error_size}; dvr_gl asked for VTK's RMSE with "
-             "`tolerance=`, its pilot inside the timed frames only the first time)", "",
-             "| scene | VTK step (voxel) | VTK ms | VTK RMSE | dvr_gl step (voxel), sampling | dvr_gl ms | dvr_gl RMSE | "
-             "time / VTK |", "|---|---|---|---|---|---|---|---|"]
-    for name, k, tv, ev, sg, tg, eg in rows:
-        lines.append(f"| {name} | {k:g} | {tv:.0f} | {ev:.2e} | {sg} | {tg:.0f} | {eg:.2e} | {tg / tv:.2f} |")
+             "`tolerance=`, its pilot inside the timed frames only the first time; adaptive: refined "
+             f"pre-integration, `refine={REFINE_PARTS}`, at VTK's step)", "",
+             "| scene | VTK step (voxel) | VTK ms | VTK RMSE | tolerance: dvr_gl step (voxel), sampling | ms | RMSE | "
+             "time / VTK | adaptive: ms | RMSE | time / VTK |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for name, k, tv, ev, sg, tg, eg, ta, ea in rows:
+        lines.append(f"| {name} | {k:g} | {tv:.0f} | {ev:.2e} | {sg} | {tg:.0f} | {eg:.2e} | {tg / tv:.2f} | "
+                     f"{ta:.0f} | {ea:.2e} | {ta / tv:.2f} |")
     ratios = [r[5] / r[2] for r in rows]
     met = sum(1 for r in rows if r[6] <= r[3])
-    lines += ["", f"dvr_gl's error at or below VTK's in {met} of {len(rows)}; time / VTK from "
-                  f"{min(ratios):.2f} to {max(ratios):.2f} (median {np.median(ratios):.2f})."]
+    adaptive_met = sum(1 for r in rows if r[8] <= r[3])
+    error_ratios = [r[8] / r[3] for r in rows]
+    lines += ["", f"Tolerance: dvr_gl's error at or below VTK's in {met} of {len(rows)}; time / VTK from "
+                  f"{min(ratios):.2f} to {max(ratios):.2f} (median {np.median(ratios):.2f}).",
+              f"Adaptive: error at or below VTK's in {adaptive_met} of {len(rows)}, {min(error_ratios):.3f}x to "
+              f"{max(error_ratios):.3f}x of it; time / VTK from {min(r[7] / r[2] for r in rows):.2f} to "
+              f"{max(r[7] / r[2] for r in rows):.2f}."]
     if targets:
         lines += ["", "Fixed targets, beside VTK's one-voxel frame (its RMSE in the table above):", "",
                   "| scene | requested RMSE | VTK 1-voxel ms | dvr_gl step (voxel), sampling | dvr_gl ms | dvr_gl RMSE | "
