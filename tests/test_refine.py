@@ -69,7 +69,7 @@ def test_gradient_bound_is_a_lipschitz_bound_of_the_trilinear_field():
     v = volume.values(np.float64)
     ratios = []
     for _ in range(3000):
-        bz, by, bx = (rng.integers(0, n) for n in bounds.shape[:3])
+        bz, by, bx = (rng.integers(0, n) for n in bounds.shape)
         centre = (np.array([bx, by, bz]) + 0.5) * block                      # in index space
         p, q = (np.clip(centre + rng.uniform(-block, block, 3), 0, np.array(v.shape[::-1]) - 1)
                 for _ in range(2))
@@ -77,41 +77,9 @@ def test_gradient_bound_is_a_lipschitz_bound_of_the_trilinear_field():
         if dist == 0:
             continue
         change = abs(float(trilinear(v, p[None])[0] - trilinear(v, q[None])[0]))
-        ratios.append(change / (bounds[bz, by, bx, 0] * dist))
+        ratios.append(change / (bounds[bz, by, bx] * dist))
     assert max(ratios) <= 1.0
     assert max(ratios) > 0.2
-
-
-def test_gradient_spread_bounds_how_far_the_field_leaves_a_chord():
-    """Along random segments within one block and its 26 neighbours, the trilinear field
-    stays within a quarter of the length times the slope's spread along the segment
-    (|direction| dotted with the components' spreads) of the straight line between its
-    ends, crossing cell faces included; and the bound is not loose by more than 10x on
-    its worst case."""
-    rng = np.random.default_rng(5)
-    values = rng.normal(size=(9, 11, 13)).astype(np.float32) * 50
-    values += np.linspace(0, 400, 13, dtype=np.float32)      # a trend, which the spread ignores
-    volume = dvr_gl.Volume(values, spacing=(0.7, 1.3, 0.4))
-    bounds = raycast.gradient_bounds(volume)
-    block = raycast.REACH_BLOCK
-    v = volume.values(np.float64)
-    ratios = []
-    u = np.linspace(0, 1, 201)
-    for _ in range(1500):
-        bz, by, bx = (rng.integers(0, n) for n in bounds.shape[:3])
-        centre = (np.array([bx, by, bz]) + 0.5) * block                      # in index space
-        p, q = (np.clip(centre + rng.uniform(-block, block, 3), 0, np.array(v.shape[::-1]) - 1)
-                for _ in range(2))
-        span = (q - p) * volume.spacing
-        length = float(np.linalg.norm(span))
-        if length == 0:
-            continue
-        field = trilinear(v, p[None] + u[:, None] * (q - p)[None])
-        chord = field[0] + u * (field[-1] - field[0])
-        bend = 0.25 * length * float(np.abs(span / length) @ bounds[bz, by, bx, 1:].astype(np.float64))
-        ratios.append(np.abs(field - chord).max() / bend)
-    assert max(ratios) <= 1.0
-    assert max(ratios) > 0.1
 
 
 def test_detail_intervals_hold_every_bend_with_opacity():
@@ -153,7 +121,7 @@ def nonzero_lookups(plan, margin):
         live = b > a
         sa, sb = (trilinear(values, (o + t[:, None] * d) / scene.volume.spacing) for t in (a, b))
         g = plan.reach[raycast.block_of(scene.volume, o + (0.5 * (a + b))[:, None] * d, plan.reach.shape,
-                                        raycast.REACH_BLOCK)][:, 0].astype(np.float64)
+                                        raycast.REACH_BLOCK)].astype(np.float64)
         pad = 0.5 * g * (b - a) + margin
         touches = (np.maximum(sa, sb) + pad >= lo) & (np.minimum(sa, sb) - pad <= hi)
         count += np.where(live & touches, raycast.refine_cuts(plan), 0)

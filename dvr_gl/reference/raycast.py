@@ -50,11 +50,8 @@ def _refined_segments(plan, s_front, s_back, a, length, midpoints, sample, light
     volume = plan.scene.volume
     bound = plan.reach[block_of(volume, midpoints, plan.reach.shape, REACH_BLOCK)].astype(np.float64)
     mid = 0.5 * (s_front + s_back)
-    reach = 0.5 * np.maximum(bound[:, 0] * length, np.abs(s_back - s_front))
-    _, all_dirs = sample.rays(np.arange(len(s_front)))
-    bend = 0.25 * length * np.einsum("ij,ij->i", np.abs(all_dirs), bound[:, 1:])
-    split = touches_detail(plan.detail, np.maximum(mid - reach, np.minimum(s_front, s_back) - bend),
-                           np.minimum(mid + reach, np.maximum(s_front, s_back) + bend))
+    reach = 0.5 * np.maximum(bound * length, np.abs(s_back - s_front))
+    split = touches_detail(plan.detail, mid - reach, mid + reach)
     out = plan.preint.segment(s_front, s_back, length)
     if light is not None:
         out = light.segments(out, a + 0.5 * length)

@@ -56,12 +56,12 @@ refine : 1 (default) or an integer from 2 to 64, with ``preintegrate=True``: ada
     linear between a segment's ends; the trilinear field is not, and a narrow opacity
     feature (a spike a few per cent of the range wide) is then misplaced by a fraction of
     a step, which converges only at first order. Along a segment of length L the field
-    stays within ``G L / 2`` of the mean of its ends and within ``W L / 4`` of the
-    straight line between them (``gradient_bounds`` over the segment's block of
-    REACH_BLOCK cells and the blocks half a step around it, made once per volume: G
-    bounds the gradient's magnitude, W the spread of its slope along the ray), so when
-    the values both allow hold no knot at which the TF's opacity bends (with opacity on
-    one side), the TF is one line over everything the segment can see. Otherwise the segment
+    stays within ``G L / 2`` of the mean of its ends (G: a bound on the gradient's
+    magnitude over the segment's block of REACH_BLOCK cells and the blocks half a step
+    around it, from the
+    largest sample differences of each cell, made once per volume), so when that
+    reachable interval holds no knot at which the TF's opacity bends (with opacity on one
+    side), the TF is one line over everything the segment can see. Otherwise the segment
     is cut into ``refine`` even parts and at every cell face it crosses (between two cuts
     the field is one smooth cubic, so the straight line errs at second order), each part
     sampled, read from a second table made for its length and lit at its own midpoint:
@@ -121,7 +121,7 @@ class RaycastPlan:
     refine: int = 1                        # parts per refined pre-integrated segment
     preint_fine: object = None             # the table for step / refine, or None
     bricks: np.ndarray | None = None       # pre-integration with skipping: (bz, by, bx) float32 occupied
-    reach: np.ndarray | None = None        # refine: gradient_bounds per REACH_BLOCK cells, float32
+    reach: np.ndarray | None = None        # refine: gradient bounds per REACH_BLOCK cells, float32
     detail: np.ndarray | None = None       # refine: (n, 2) value intervals of the TF's detail
     defines: dict = field(default_factory=dict)
     step_rows: np.ndarray | None = None    # LookupTable.step_table for this step, or None
@@ -262,49 +262,34 @@ def brick_value_ranges(volume):
 
 
 def gradient_bounds(volume, radius=1):
-    """Per block of REACH_BLOCK cells (bz, by, bx, 4), float32, over the block and the
-    blocks within ``radius`` of it along each axis (26 neighbours for 1; a segment whose
-    midpoint is in the block and whose half length is at most ``radius`` blocks'
-    smallest side stays among them), bounds on the trilinear field's gradient:
-
-    - 0: on its magnitude, G;
-    - 1 to 3: on the spread (largest minus least) of its x, y and z components.
-
-    In a cell each partial derivative is a convex combination of the differences along
-    that axis's four edges, so it lies between their least and greatest (over spacing),
-    and the cell's ``sqrt(sum over axes of (largest edge difference / spacing)^2)``
-    bounds the magnitude. Rounded up to float32. Once per volume (non-finite samples
-    count as 0; masked cells add nothing anyway)."""
-    from scipy.ndimage import maximum_filter, minimum_filter
+    """Per block of REACH_BLOCK cells (bz, by, bx), float32: a bound on the magnitude of
+    the trilinear field's gradient over the block and the blocks within ``radius`` of it
+    along each axis (26 neighbours for 1; a segment whose midpoint is in the block and
+    whose half length is at most ``radius`` blocks' smallest side stays among them). In a cell each
+    partial derivative is a convex combination of the differences along that axis's four
+    edges, so the cell's ``sqrt(sum over axes of (largest edge difference / spacing)^2)``
+    bounds it (rounded up to float32). Once per volume (non-finite samples count as 0;
+    masked cells add nothing anyway)."""
+    from scipy.ndimage import maximum_filter
     v = np.nan_to_num(volume.values(np.float64), nan=0.0, posinf=0.0, neginf=0.0)
-    cells_shape = tuple(max(n - 1, 1) for n in v.shape)
-    nb = [max(1, math.ceil(n / REACH_BLOCK)) for n in cells_shape]
-    size = 2 * int(radius) + 1
-
-    def per_block(cells, reduce):
-        # cells beyond the volume (padding to whole blocks) read as the nearest real one
-        padded = np.pad(cells, [(0, b * REACH_BLOCK - n) for b, n in zip(nb, cells.shape)], mode="edge")
-        return reduce(padded.reshape(nb[0], REACH_BLOCK, nb[1], REACH_BLOCK, nb[2], REACH_BLOCK), axis=(1, 3, 5))
-
-    squares = np.zeros(cells_shape)
-    spreads = []
-    for axis, h in ((2, volume.spacing[0]), (1, volume.spacing[1]), (0, volume.spacing[2])):
-        if v.shape[axis] < 2:         # one sample along the axis: the field is constant along it
-            spreads.append(np.zeros(nb))
+    sx, sy, sz = volume.spacing
+    squares = np.zeros(tuple(max(n - 1, 1) for n in v.shape))
+    for axis, h in ((2, sx), (1, sy), (0, sz)):
+        if v.shape[axis] < 2:
             continue
-        least = greatest = np.diff(v, axis=axis) / h
-        for a in (a for a in range(3) if a != axis):    # over the cell's four edges
-            if least.shape[a] > 1:
-                pairs = [np.arange(least.shape[a] - 1), np.arange(1, least.shape[a])]
-                least = np.minimum(*(np.take(least, i, axis=a) for i in pairs))
-                greatest = np.maximum(*(np.take(greatest, i, axis=a) for i in pairs))
-        squares += np.maximum(np.abs(least), np.abs(greatest)) ** 2
-        lo = minimum_filter(per_block(least, np.min), size=size, mode="nearest")
-        hi = maximum_filter(per_block(greatest, np.max), size=size, mode="nearest")
-        spreads.append(hi - lo)
-    magnitude = maximum_filter(per_block(np.sqrt(squares), np.max), size=size, mode="nearest")
-    bounds = np.stack([magnitude, *spreads], axis=-1) * (1 + 2.0 ** -20)
-    return bounds.astype(np.float32)
+        edge = np.abs(np.diff(v, axis=axis)) / h
+        for a in (a for a in range(3) if a != axis):    # the largest of the cell's four edges
+            if edge.shape[a] > 1:
+                edge = np.maximum(np.take(edge, np.arange(edge.shape[a] - 1), axis=a),
+                                  np.take(edge, np.arange(1, edge.shape[a]), axis=a))
+        squares += edge ** 2
+    cells = np.sqrt(squares)
+    nb = [max(1, math.ceil((n - 1) / REACH_BLOCK)) for n in v.shape]
+    padded = np.zeros([b * REACH_BLOCK for b in nb])
+    padded[:cells.shape[0], :cells.shape[1], :cells.shape[2]] = cells
+    per_block = padded.reshape(nb[0], REACH_BLOCK, nb[1], REACH_BLOCK, nb[2], REACH_BLOCK).max(axis=(1, 3, 5))
+    bound = maximum_filter(per_block, size=2 * int(radius) + 1, mode="nearest") * (1 + 2.0 ** -20)
+    return bound.astype(np.float32)
 
 
 def preint_occupancy(ranges, tf, table):
@@ -532,7 +517,7 @@ def draw(renderer, plan):
             "preint_occupancy", plan.bricks, 1, "f4", linear=False))
     if plan.reach is not None:
         textures["t_reach"] = renderer.resource("gradient_bounds", plan.reach, make=lambda: renderer.texture3d(
-            "gradient_bounds", plan.reach, 4, "f4", linear=False))
+            "gradient_bounds", plan.reach, 1, "f4", linear=False))
         uniforms["u_reach_block"] = float(REACH_BLOCK)
     if plan.refine > 1:
         detail = np.zeros((MAX_DETAIL, 2), np.float32)

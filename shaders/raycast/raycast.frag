@@ -79,9 +79,8 @@ uniform sampler3D t_occupancy; // per brick: 1 if any value in it has non-zero o
 uniform float u_brick;         // brick size in samples
 #endif
 #if REFINE
-uniform sampler3D t_reach;     // RGBA32F per block of u_reach_block cells, over it and its
-                               // neighbours: a bound on the field's gradient (r) and on the
-                               // spread of its x, y, z components (gba; gradient_bounds)
+uniform sampler3D t_reach;     // R32F per block of u_reach_block cells: a bound on the
+                               // field's gradient over it and its 26 neighbours
 uniform float u_reach_block;
 #define MAX_DETAIL 8
 uniform vec2 u_detail[MAX_DETAIL];  // value intervals holding the TF's detail knots
@@ -338,20 +337,15 @@ void main() {
         bool priming = !have_front;
     #endif
   #if REFINE
-        // The values the field can take between the ends: within the gradient bound times
-        // the distance of either end, and, since its slope along the ray varies by at most
-        // the components' spread, within a quarter of that spread times the length of the
-        // straight line between the ends. If they touch a bend of the TF's opacity (a
-        // narrow feature), the segment is split into u_refine parts, each sampled and
+        // The field may leave the straight line between the ends by the gradient bound
+        // times the distance: if the values it can reach touch a bend of the TF's opacity
+        // (a narrow feature), the segment is split into u_refine parts, each sampled and
         // read from the table of their length. (llvmpipe runs the parts' loop body once
         // even where no pixel refines: the README measures what that costs.)
         float mid = 0.5 * (s_front + s_back);
         ivec3 block = clamp(ivec3(floor(p / u_spacing / u_reach_block)), ivec3(0), textureSize(t_reach, 0) - 1);
-        vec4 bound = texelFetch(t_reach, block, 0);
-        float reach = 0.5 * max(bound.r * len, abs(s_back - s_front));
-        float bend = 0.25 * len * dot(abs(dir), bound.gba);
-        bool refined = touchesDetail(max(mid - reach, min(s_front, s_back) - bend),
-                                     min(mid + reach, max(s_front, s_back) + bend));
+        float reach = 0.5 * max(texelFetch(t_reach, block, 0).r * len, abs(s_back - s_front));
+        bool refined = touchesDetail(mid - reach, mid + reach);
         vec4 segment = vec4(0.0);
         if (refined) {
             // The segment is cut at its u_refine - 1 even points and wherever it crosses a
