@@ -233,3 +233,28 @@ def test_refined_jittered_and_masked_rays_match_the_reference(renderer):
         ref = reference.render(scene, technique="raycast", **opts)
         assert ref[..., 3].max() > 0.05
         assert metrics.max_abs_error(gl, ref) <= refined_tolerance(plan)
+
+
+def test_refined_rays_end_early_where_the_reference_does(renderer):
+    """Early termination is decided at a segment's end, refined or not, as in the
+    reference: rays through the dense TF end early, and a decision taken differently in
+    float32 moves a pixel by at most the light left behind (the threshold)."""
+    ert = 0.05
+    scene = _scene(TF)
+    opts = dict(step=1.1, preintegrate=True, refine=4, ert_transmittance=ert)
+    plan = raycast.make_plan(scene, **opts)
+    gl = renderer.render(scene, **opts)
+    ref = reference.render(scene, technique="raycast", **opts)
+    full = reference.render(scene, technique="raycast", **dict(opts, ert_transmittance=0.0))
+    assert metrics.max_abs_error(full, ref) > 0.5 * ert      # some rays do end early
+    assert metrics.max_abs_error(gl, ref) <= refined_tolerance(plan) + ert
+
+
+def test_refinement_with_a_transparent_tf_draws_nothing(renderer):
+    """A TF with no opacity has no detail to refine at: the shader gets one interval no
+    value meets, and the image is empty."""
+    tf = dvr_gl.TransferFunction(color=[(0, 1, 1, 1), (100, 1, 1, 1)], opacity=[(0, 0.0), (100, 0.0)])
+    scene = _scene(tf)
+    assert len(raycast.detail_intervals(tf)) == 0
+    image = renderer.render(scene, step=1.1, preintegrate=True, refine=4)
+    assert not image.any()

@@ -206,6 +206,8 @@ def make_plan(scene, step=None, *, target="rgba32f", jitter_seed=None, ert_trans
             defines["SKIP_EMPTY"] = 1
         if refine > 1:
             defines["REFINE"] = 1
+            # a compile-time count: a uniform one cost the spike's frame 10 % (README)
+            defines["DETAIL_COUNT"] = max(len(detail), 1)
     defines.update(shading_defines(scene, gradients))
     step_rows = None
     if check_flag("step_table", step_table) and uses_step_table(scene, preint):
@@ -320,7 +322,7 @@ def detail_knots(tf):
     return knots[near]
 
 
-MAX_DETAIL = 8         # detail intervals the shader tests (uniforms)
+MAX_DETAIL = 8         # detail intervals the shader tests (DETAIL_COUNT, compiled in)
 
 
 def detail_intervals(tf):
@@ -520,9 +522,9 @@ def draw(renderer, plan):
             "gradient_bounds", plan.reach, 1, "f4", linear=False))
         uniforms["u_reach_block"] = float(REACH_BLOCK)
     if plan.refine > 1:
-        detail = np.zeros((MAX_DETAIL, 2), np.float32)
-        detail[:len(plan.detail)] = plan.detail
-        uniforms.update({"u_detail_count": len(plan.detail), "u_refine": plan.refine,
+        # (no detail: one interval no value meets)
+        detail = np.array(plan.detail if len(plan.detail) else [[np.inf, -np.inf]], np.float32)
+        uniforms.update({"u_refine": plan.refine,
                          "u_pi_fine_length": plan.preint_fine.length,
                          "u_refine_cuts": refine_cuts(plan)})
     if plan.ert_transmittance > 0:

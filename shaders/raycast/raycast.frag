@@ -82,17 +82,18 @@ uniform float u_brick;         // brick size in samples
 uniform sampler3D t_reach;     // R32F per block of u_reach_block cells: a bound on the
                                // field's gradient over it and its 26 neighbours
 uniform float u_reach_block;
-#define MAX_DETAIL 8
-uniform vec2 u_detail[MAX_DETAIL];  // value intervals holding the TF's detail knots
-uniform int u_detail_count;
+#ifndef DETAIL_COUNT
+#define DETAIL_COUNT 1
+#endif
+uniform vec2 u_detail[DETAIL_COUNT];  // value intervals holding the TF's detail knots
 uniform int u_refine;         // even parts per refined segment
 uniform float u_pi_fine_length; // the nominal length of their table
 uniform int u_refine_cuts;    // a bound on a refined segment's cuts (its parts and faces)
 // Can a value in [lo, hi] lie on a knot where the TF's opacity bends?
 bool touchesDetail(float lo, float hi) {
     bool touches = false;
-    for (int k = 0; k < MAX_DETAIL; ++k) {
-        touches = touches || (k < u_detail_count && hi >= u_detail[k].x && lo <= u_detail[k].y);
+    for (int k = 0; k < DETAIL_COUNT; ++k) {
+        touches = touches || (hi >= u_detail[k].x && lo <= u_detail[k].y);
     }
     return touches;
 }
@@ -306,6 +307,111 @@ void main() {
     k_first = int(clamp(floor((t_enter - t0) / u_step - jitter) - 1.0, -1.0, float(u_max_segments)));
     k_last = int(clamp(floor((t_leave - t0) / u_step - jitter) + 1.0, -1.0, float(u_max_segments)));
   #endif
+  #if MODE_COMPOSITE && PREINTEGRATE && REFINE
+    // One loop over pieces: a piece is a whole segment, or, where the segment may meet
+    // TF detail, one part of its walk from cut to cut. Each round fetches one value and
+    // reads one table: llvmpipe runs a round for a group of pixels as long as any of them
+    // has pieces left, so pixels walking a refined segment cost their neighbours no more
+    // than the rounds they take themselves (a walk nested in the segment loop made every
+    // segment pay for the longest walk in its group).
+    int k = k_first;
+    bool walking = false;           // inside a refined segment [a_walk, b_walk]
+    float a_walk = 0.0, b_walk = 0.0, part = 0.0;
+    int even = 1;
+    vec3 t_face = vec3(0.0), t_cell = vec3(0.0);
+    float t_prev = max(t0 + (jitter + float(k_first)) * u_step, t0);   // the next piece's front
+    s_front = sampleVolume(origin + t_prev * dir);
+    int rounds_left = u_max_segments * (u_refine_cuts + 2);
+    vec3 inv_dir = 1.0 / dir;
+    t_cell = mix(u_spacing * abs(inv_dir), vec3(0.0), equal(dir, vec3(0.0)));
+    for (; rounds_left > 0; --rounds_left) {
+        float t_next;
+        if (walking) {
+            float t_even = even < u_refine ? a_walk + float(even) * part : b_walk;
+            t_next = min(min(t_even, min(t_face.x, min(t_face.y, t_face.z))), b_walk);
+        } else {
+            if (k > k_last || k >= u_max_segments) break;
+            float a = max(t0 + (jitter + float(k)) * u_step, t0);
+            if (a >= t1) break;
+            t_next = min(t0 + (jitter + float(k + 1)) * u_step, t1);
+            if (!have_front || t_next <= a) {
+                // after a skip (or a masked cell): read the front of segment k first
+                t_next = a;
+            }
+            t_prev = a;
+        }
+        float len = t_next - t_prev;
+        vec3 p = origin + (0.5 * (t_prev + t_next)) * dir;
+    #if MASK_NONFINITE
+        if (!walking && len > 0.0 && !insideValidCell(p)) {
+            have_front = false;
+            ++k;
+            continue;
+        }
+    #endif
+        float s_next = sampleVolume(origin + t_next * dir);
+        bool priming = !walking && !have_front;
+        bool empty_piece = !walking && len <= 0.0;
+        if (!walking && have_front && len > 0.0) {
+            // The field may leave the straight line between the ends by the gradient
+            // bound times the distance: if the values it can reach touch a bend of the
+            // TF's opacity (a narrow feature), the segment is walked instead, cut at its
+            // u_refine - 1 even points and wherever it crosses a cell face (where the
+            // trilinear field's slope jumps: between two cuts it is one smooth cubic, so
+            // the straight line errs at second order), each part read from the table of
+            // the parts' length.
+            float mid = 0.5 * (s_front + s_next);
+            ivec3 block = clamp(ivec3(floor(p / u_spacing / u_reach_block)), ivec3(0), textureSize(t_reach, 0) - 1);
+            float reach = 0.5 * max(texelFetch(t_reach, block, 0).r * len, abs(s_next - s_front));
+            if (touchesDetail(mid - reach, mid + reach)) {
+                walking = true;
+                a_walk = t_prev;
+                b_walk = t_next;
+                part = len / float(u_refine);
+                even = 1;
+                vec3 index_a = (origin + a_walk * dir) / u_spacing;
+                vec3 face = mix(floor(index_a) + 1.0, ceil(index_a) - 1.0, lessThan(dir, vec3(0.0)));
+                t_face = mix((face * u_spacing - origin) * inv_dir, vec3(3.0e38), equal(dir, vec3(0.0)));
+                continue;   // its first part is the next round's
+            }
+        }
+        // (one call with the table chosen: llvmpipe would run both calls of a choice)
+        vec4 piece = preintegratedSegmentIn(walking ? 2 * u_pi_size : 0, s_front, s_next, len,
+                                            walking ? u_pi_fine_length : u_pi_length);
+        piece = litSegment(piece, p, dir);
+        bool segment_done = true;
+        bool whole = !walking;
+        if (walking) {
+            float t_even = even < u_refine ? a_walk + float(even) * part : b_walk;
+            if (t_even <= t_next) even += 1;
+            t_face += mix(vec3(0.0), t_cell, lessThanEqual(t_face, vec3(t_next)));
+            segment_done = t_next >= b_walk;
+            walking = !segment_done;
+        }
+        s_front = s_next;
+        t_prev = t_next;
+        have_front = true;
+        if (priming) continue;
+        if (segment_done) ++k;
+        if (empty_piece) continue;
+    #if SKIP_EMPTY
+        if (piece.a <= 0.0 && whole) {
+            int k_skip = lastSegmentInEmptyBrick(p, origin, dir, t0, jitter, k - 1);
+            if (k_skip > k - 1) {
+                k = k_skip + 1;   // its front is read first
+                have_front = false;
+            }
+            continue;
+        }
+    #endif
+        compositePremultiplied(color, alpha_acc, piece);
+    #if EARLY_RAY_TERMINATION
+        // (at a segment's end, as without refinement)
+        if (segment_done && 1.0 - alpha_acc < u_ert_transmittance) break;
+    #endif
+        if (alpha_acc >= 1.0) break;
+    }
+  #else
   #if MODE_COMPOSITE && PREINTEGRATE
     s_front = sampleVolume(origin + max(t0 + (jitter + float(k_first)) * u_step, t0) * dir);
   #endif
@@ -336,48 +442,7 @@ void main() {
         // !have_front would cost every segment a second fetch.
         bool priming = !have_front;
     #endif
-  #if REFINE
-        // The field may leave the straight line between the ends by the gradient bound
-        // times the distance: if the values it can reach touch a bend of the TF's opacity
-        // (a narrow feature), the segment is split into u_refine parts, each sampled and
-        // read from the table of their length. (llvmpipe runs the parts' loop body once
-        // even where no pixel refines: the README measures what that costs.)
-        float mid = 0.5 * (s_front + s_back);
-        ivec3 block = clamp(ivec3(floor(p / u_spacing / u_reach_block)), ivec3(0), textureSize(t_reach, 0) - 1);
-        float reach = 0.5 * max(texelFetch(t_reach, block, 0).r * len, abs(s_back - s_front));
-        bool refined = touchesDetail(mid - reach, mid + reach);
-        vec4 segment = vec4(0.0);
-        if (refined) {
-            // The segment is cut at its u_refine - 1 even points and wherever it crosses a
-            // cell face (where the trilinear field's slope jumps: between two cuts it is
-            // one smooth cubic, so the straight line errs at second order); a walk from
-            // cut to cut, fetching each, reading the table of the parts' length.
-            float part = len / float(u_refine);
-            vec3 index_a = (origin + a * dir) / u_spacing;
-            vec3 face = mix(floor(index_a) + 1.0, ceil(index_a) - 1.0, lessThan(dir, vec3(0.0)));
-            vec3 t_face = mix((face * u_spacing - origin) / dir, vec3(3.0e38), equal(dir, vec3(0.0)));
-            vec3 t_cell = mix(u_spacing / abs(dir), vec3(0.0), equal(dir, vec3(0.0)));
-            float t_prev = a;
-            float s_prev = s_front;
-            int even = 1;
-            for (int n = 0; n < u_refine_cuts && t_prev < b; ++n) {
-                float t_even = even < u_refine ? a + float(even) * part : b;
-                float t_next = min(min(t_even, min(t_face.x, min(t_face.y, t_face.z))), b);
-                float s_next = t_next < b ? sampleVolume(origin + t_next * dir) : s_back;
-                vec4 piece = preintegratedSegmentIn(2 * u_pi_size, s_prev, s_next, t_next - t_prev, u_pi_fine_length);
-                piece = litSegment(piece, origin + (0.5 * (t_prev + t_next)) * dir, dir);   // each part at its midpoint
-                segment = over(segment, piece);
-                if (t_even <= t_next) even += 1;
-                t_face += mix(vec3(0.0), t_cell, lessThanEqual(t_face, vec3(t_next)));
-                t_prev = t_next;
-                s_prev = s_next;
-            }
-        } else {
-            segment = litSegment(preintegratedSegment(s_front, s_back, len), p, dir);
-        }
-  #else
         vec4 segment = litSegment(preintegratedSegment(s_front, s_back, len), p, dir);
-  #endif
         s_front = s_back;
         have_front = true;
   #if !MASK_NONFINITE
@@ -451,6 +516,7 @@ void main() {
         t_prev = tm;
 #endif
     }
+  #endif
 #endif
 
 #if SABELLA
