@@ -57,15 +57,15 @@ def test_preintegrated_occupancy_counts_a_spike_between_table_nodes():
 
 # -- the gradient bound and the TF's detail ------------------------------------------------
 
-def test_gradient_bound_is_a_lipschitz_bound_of_the_trilinear_field():
+@pytest.mark.parametrize("block", [1, 2])
+def test_gradient_bound_is_a_lipschitz_bound_of_the_trilinear_field(block):
     """For random pairs of points within one block and its 26 neighbours, the field
     changes by no more than the block's bound times their distance; and the bound is
     not loose by more than the cell rule's own factor (edges of a cell can differ)."""
     rng = np.random.default_rng(3)
     values = rng.normal(size=(9, 11, 13)).astype(np.float32) * 50
     volume = dvr_gl.Volume(values, spacing=(0.7, 1.3, 0.4))
-    bounds = raycast.gradient_bounds(volume)
-    block = raycast.REACH_BLOCK
+    bounds = raycast.gradient_bounds(volume, 1, block)
     v = volume.values(np.float64)
     ratios = []
     for _ in range(3000):
@@ -121,7 +121,7 @@ def nonzero_lookups(plan, margin):
         live = b > a
         sa, sb = (trilinear(values, (o + t[:, None] * d) / scene.volume.spacing) for t in (a, b))
         g = plan.reach[raycast.block_of(scene.volume, o + (0.5 * (a + b))[:, None] * d, plan.reach.shape,
-                                        raycast.REACH_BLOCK)].astype(np.float64)
+                                        plan.reach_block)].astype(np.float64)
         pad = 0.5 * g * (b - a) + margin
         touches = (np.maximum(sa, sb) + pad >= lo) & (np.minimum(sa, sb) - pad <= hi)
         count += np.where(live & touches, raycast.refine_cuts(plan), 0)
@@ -192,14 +192,14 @@ def test_refinement_only_where_the_tf_has_detail(renderer):
 
 
 def test_refinement_at_long_steps_bounds_the_field_over_more_blocks(renderer):
-    """Half a 6-voxel segment reaches 2 blocks of 2 cells from its midpoint's: the
-    gradient bound is taken over those (a radius of 2), and GL still matches the
-    reference."""
+    """Half a 5.9-voxel segment reaches 3 cells from its midpoint's: the gradient bound
+    is taken over those (a radius of 3), and GL still matches the reference."""
     scene = _scene(SPIKE)
-    opts = dict(step=6 * VOLUME.min_spacing, preintegrate=True, refine=8, ert_transmittance=0.0)
+    opts = dict(step=5.9 * VOLUME.min_spacing, preintegrate=True, refine=8, ert_transmittance=0.0)
     plan = raycast.make_plan(scene, **opts)
-    np.testing.assert_array_equal(plan.reach, raycast.gradient_bounds(VOLUME, 2))
-    assert plan.reach.sum() > raycast.gradient_bounds(VOLUME, 1).sum()
+    assert plan.reach_block == 1
+    np.testing.assert_array_equal(plan.reach, raycast.gradient_bounds(VOLUME, 3, 1))
+    assert plan.reach.sum() > raycast.gradient_bounds(VOLUME, 1, 1).sum()
     gl = renderer.render(scene, **opts)
     ref = reference.render(scene, technique="raycast", **opts)
     assert ref[..., 3].max() > 0.05
@@ -258,3 +258,26 @@ def test_refinement_with_a_transparent_tf_draws_nothing(renderer):
     assert len(raycast.detail_intervals(tf)) == 0
     image = renderer.render(scene, step=1.1, preintegrate=True, refine=4)
     assert not image.any()
+
+
+def test_large_volumes_bound_the_gradient_per_block_of_cells(renderer, monkeypatch):
+    """Above MAX_REACH_BOUNDS cells the bounds cover blocks of 2 (then 4, ...) cells, so
+    that their memory stays within the budget; the shader reads the plan's block, and GL
+    still matches the reference."""
+    cells = int(np.prod(np.array(VOLUME.shape) - 1))
+    assert raycast.reach_block(VOLUME) == 1
+    monkeypatch.setattr(raycast, "MAX_REACH_BOUNDS", cells // 2)
+    assert raycast.reach_block(VOLUME) == 2
+    monkeypatch.setattr(raycast, "MAX_REACH_BOUNDS", cells // 20)
+    assert raycast.reach_block(VOLUME) == 4
+    monkeypatch.setattr(raycast, "MAX_REACH_BOUNDS", cells // 2)
+    scene = _scene(SPIKE)
+    opts = dict(step=1.1, preintegrate=True, refine=4, ert_transmittance=0.0)
+    plan = raycast.make_plan(scene, **opts)
+    assert plan.reach_block == 2
+    assert plan.reach.size <= cells // 2
+    np.testing.assert_array_equal(plan.reach, raycast.gradient_bounds(VOLUME, 1, 2))
+    gl = renderer.render(scene, **opts)
+    ref = reference.render(scene, technique="raycast", **opts)
+    assert ref[..., 3].max() > 0.05
+    assert metrics.max_abs_error(gl, ref) <= refined_tolerance(plan)

@@ -46,9 +46,9 @@ def _refined_segments(plan, s_front, s_back, a, length, midpoints, sample, light
     its own midpoint, composited front to back; the others are lit whole at theirs.
     ``sample(t, rows)`` samples the rows' rays at ``t``; ``light`` is the rows'
     RayLighting, or None."""
-    from ..techniques.raycast import REACH_BLOCK, block_of, touches_detail
+    from ..techniques.raycast import block_of, touches_detail
     volume = plan.scene.volume
-    bound = plan.reach[block_of(volume, midpoints, plan.reach.shape, REACH_BLOCK)].astype(np.float64)
+    bound = plan.reach[block_of(volume, midpoints, plan.reach.shape, plan.reach_block)].astype(np.float64)
     mid = 0.5 * (s_front + s_back)
     reach = 0.5 * np.maximum(bound * length, np.abs(s_back - s_front))
     split = touches_detail(plan.detail, mid - reach, mid + reach)
