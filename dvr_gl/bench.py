@@ -584,9 +584,15 @@ def figure_png(rows, info) -> bytes:
 
 
 def error_axes(ax, xlabel, ylabel):
-    """Log-log axes of error against time, gridded, with a legend."""
+    """Log-log axes of error against time, gridded, with a legend. Times are labelled
+    at 1, 2 and 5 per decade as plain numbers (matplotlib's default labels the minor
+    ticks of an axis spanning less than a decade, where they overlap)."""
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
     ax.set_xscale("log")
     ax.set_yscale("log")
+    ax.xaxis.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
+    ax.xaxis.set_major_formatter(FuncFormatter(lambda value, _: f"{value:g}"))
+    ax.xaxis.set_minor_formatter(NullFormatter())
     ax.set_xlabel(xlabel)
     ax.set_ylabel(ylabel)
     ax.grid(True, which="both", alpha=0.3)
