@@ -79,8 +79,9 @@ uniform sampler3D t_occupancy; // per brick: 1 if any value in it has non-zero o
 uniform float u_brick;         // brick size in samples
 #endif
 #if REFINE
-uniform sampler3D t_reach;     // R32F per block of u_reach_block cells: a bound on the
-                               // field's gradient over it and its 26 neighbours
+uniform sampler3D t_reach;     // R32F per block of u_reach_block cells (1 unless the volume
+                               // is large): a bound on the field's gradient over it and
+                               // the blocks half a step around it (raycast.gradient_bounds)
 uniform float u_reach_block;
 #ifndef DETAIL_COUNT
 #define DETAIL_COUNT 1
