@@ -35,7 +35,10 @@ WAYS = ({}, {"preintegrate": True}, {"preintegrate": True, "refine": REFINE_PART
 
 
 def way_name(way):
-    return "plain" if not way else ("pre-int." if way.get("refine", 1) == 1 else f"refine {way['refine']}")
+    """A way of sampling (render options) in words."""
+    if not way.get("preintegrate"):
+        return "plain"
+    return "pre-int." if way.get("refine", 1) == 1 else f"refine {way['refine']}"
 
 
 def ladder_errors(gl, small, exact):
@@ -55,17 +58,24 @@ def fixed_candidates(errors, target):
     return out
 
 
-def fastest_fixed(candidates, times, errors):
-    """The candidate of least median time: (words, ms, rmse)."""
+def fastest_fixed(gl, peer, big, errors, target, repeats):
+    """The fastest fixed setting at no more than ``target``: each way's candidate timed in
+    a round robin with the peer's frame (a round robin of their own: more ways in one would
+    push each other's tables out of the renderer's caches and time their rebuilding).
+    Returns (VTK ms there, words, ms, rmse)."""
+    candidates = fixed_candidates(errors, target)
+    h = big.volume.min_spacing
+    fixed = [lambda w=w, k=k: gl.render(big, step=k * h, **WAYS[w]) for w, k in candidates]
+    _, (t_vtk, *times) = interleaved_frames([peer.frame, *fixed], repeats)
     medians = [statistics.median(t) * 1e3 for t in times]
     i = int(np.argmin(medians))
     w, k = candidates[i]
-    return f"{k:.3g}, {way_name(WAYS[w])}", medians[i], errors[(w, k)]
+    return statistics.median(t_vtk) * 1e3, f"{k:.3g}, {way_name(WAYS[w])}", medians[i], errors[(w, k)]
 
 
 def sampling(choice):
     """The chosen step and way of sampling, in words."""
-    way = "" if not choice.preintegrate else (", pre-int." if choice.refine == 1 else f", refine {choice.refine}")
+    way = "" if not choice.preintegrate else f", {way_name(choice.sampling)}"
     return f"{choice.step_voxels:.3g}{way}"
 
 
@@ -120,36 +130,25 @@ def main(argv=None):
                     choice = gl.last_choice
                     adaptive = dict(step=step, preintegrate=True, refine=REFINE_PARTS)
                     got_adaptive = metrics.rmse(gl.render(small, **adaptive), exact)
-                    candidates = fixed_candidates(errors, vtk_rmse)
-                    fixed = [lambda w=w, c=c: gl.render(big, step=c * volume.min_spacing, **WAYS[w])
-                             for w, c in candidates]
                     peer.setup(big, step)
                     _, (t_vtk, t_gl, t_adaptive) = interleaved_frames(
                         [peer.frame, lambda: gl.render(big, tolerance=vtk_rmse), lambda: gl.render(big, **adaptive)],
                         args.repeats)
-                    # a round robin of its own: more ways in one would push each other's tables
-                    # out of the renderer's caches and time their rebuilding
-                    _, (t_vtk_fixed, *t_fixed) = interleaved_frames([peer.frame, *fixed], args.repeats)
                     rows.append((name, k, statistics.median(t_vtk) * 1e3, vtk_rmse, sampling(choice),
                                  statistics.median(t_gl) * 1e3, got, statistics.median(t_adaptive) * 1e3,
-                                 got_adaptive, (statistics.median(t_vtk_fixed) * 1e3,
-                                                *fastest_fixed(candidates, t_fixed, errors))))
+                                 got_adaptive, fastest_fixed(gl, peer, big, errors, vtk_rmse, args.repeats)))
                     progress.advance(f"{name}: VTK step {k:g}")
                 for target_name, target in TARGETS:
                     if target_name != name:
                         continue
                     got = metrics.rmse(gl.render(small, tolerance=target), exact)
                     choice = gl.last_choice
-                    candidates = fixed_candidates(errors, target)
-                    fixed = [lambda w=w, c=c: gl.render(big, step=c * volume.min_spacing, **WAYS[w])
-                             for w, c in candidates]
                     peer.setup(big, volume.min_spacing)
                     _, (t_vtk, t_gl) = interleaved_frames(
                         [peer.frame, lambda: gl.render(big, tolerance=target)], args.repeats)
-                    _, (t_vtk_fixed, *t_fixed) = interleaved_frames([peer.frame, *fixed], args.repeats)
                     targets.append((name, target, statistics.median(t_vtk) * 1e3, sampling(choice),
                                     statistics.median(t_gl) * 1e3, got,
-                                    (statistics.median(t_vtk_fixed) * 1e3, *fastest_fixed(candidates, t_fixed, errors))))
+                                    fastest_fixed(gl, peer, big, errors, target, args.repeats)))
                     progress.advance(f"{name}: RMSE {target:g}")
     finally:
         progress.close()

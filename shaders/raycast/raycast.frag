@@ -319,16 +319,16 @@ void main() {
     bool walking = false;           // inside a refined segment [a_walk, b_walk]
     float a_walk = 0.0, b_walk = 0.0, part = 0.0;
     int even = 1;
-    vec3 t_face = vec3(0.0), t_cell = vec3(0.0);
+    vec3 t_face = vec3(0.0);        // the walk's next cell face along each axis
+    vec3 inv_dir = 1.0 / dir;
+    vec3 t_cell = mix(u_spacing * abs(inv_dir), vec3(0.0), equal(dir, vec3(0.0)));
     float t_prev = max(t0 + (jitter + float(k_first)) * u_step, t0);   // the next piece's front
     s_front = sampleVolume(origin + t_prev * dir);
     int rounds_left = u_max_segments * (u_refine_cuts + 2);
-    vec3 inv_dir = 1.0 / dir;
-    t_cell = mix(u_spacing * abs(inv_dir), vec3(0.0), equal(dir, vec3(0.0)));
     for (; rounds_left > 0; --rounds_left) {
         float t_next;
+        float t_even = even < u_refine ? a_walk + float(even) * part : b_walk;   // (walking)
         if (walking) {
-            float t_even = even < u_refine ? a_walk + float(even) * part : b_walk;
             t_next = min(min(t_even, min(t_face.x, min(t_face.y, t_face.z))), b_walk);
         } else {
             if (k > k_last || k >= u_max_segments) break;
@@ -383,7 +383,6 @@ void main() {
         bool segment_done = true;
         bool whole = !walking;
         if (walking) {
-            float t_even = even < u_refine ? a_walk + float(even) * part : b_walk;
             if (t_even <= t_next) even += 1;
             t_face += mix(vec3(0.0), t_cell, lessThanEqual(t_face, vec3(t_next)));
             segment_done = t_next >= b_walk;
