@@ -34,11 +34,11 @@ from scipy.ndimage import maximum_filter, minimum_filter
 
 import dvr_gl
 from dvr_gl import metrics, reference
-from dvr_gl.io import atomic_write
-from dvr_gl.progress import Progress
+from dvr_gl.formats import atomic_write
+from dvr_gl.util.progress import Progress
 from dvr_gl.reference.common import box_rays, trilinear
 from dvr_gl.techniques.raycast import BRICK, _block_reduce, brick_occupancy, brick_value_ranges
-from dvr_gl.transfer import LookupTable
+from dvr_gl.model.transfer import LookupTable
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)

@@ -22,9 +22,9 @@ import time
 
 from PIL import Image, ImageDraw
 
-from dvr_gl import cli
-from dvr_gl.bench import DEFAULT_DATA_DIR
-from dvr_gl.io import raw_name_layout
+from dvr_gl.frontends import cli
+from dvr_gl.bench.raycast import DEFAULT_DATA_DIR
+from dvr_gl.formats import raw_name_layout
 
 SKIP_SUFFIXES = (".raw.gz", ".bin", ".json", ".md")
 
@@ -76,7 +76,7 @@ def main(argv=None):
     sheet = Image.new("RGB", (columns * args.tile, rows * args.tile), "white")
     for i, picture in enumerate(tiles):
         sheet.paste(picture, ((i % columns) * args.tile, (i // columns) * args.tile))
-    from dvr_gl.io import atomic_write
+    from dvr_gl.formats import atomic_write
     import io
     buffer = io.BytesIO()
     sheet.save(buffer, format="PNG", optimize=True)

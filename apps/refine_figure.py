@@ -11,9 +11,9 @@ import numpy as np
 
 import dvr_gl
 from dvr_gl import metrics, reference
-from dvr_gl.bench import datasets, figure_bytes
-from dvr_gl.io import atomic_write
-from dvr_gl.tolerance import median_seconds
+from dvr_gl.bench.raycast import datasets, figure_bytes
+from dvr_gl.formats import atomic_write
+from dvr_gl.rendering.tolerance import median_seconds
 
 from tolerance_vs_vtk import narrow_spike
 

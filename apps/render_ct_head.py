@@ -8,13 +8,13 @@ import sys
 
 import dvr_gl
 from dvr_gl import data
-from dvr_gl.io import save_png
+from dvr_gl.formats import save_png
 
 
 def render_once(size=256, backend="auto"):
     """The picture this app shows, as a float image (the headless path tests run)."""
     head = data.ct_head()
-    from dvr_gl.demo import head_front_camera
+    from dvr_gl.frontends.demo import head_front_camera
     scene = dvr_gl.Scene(head, data.ct_head_tf(), head_front_camera(head), width=size, height=size)
     with dvr_gl.Renderer(backend=backend) as r:
         return r.render(scene)

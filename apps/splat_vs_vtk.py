@@ -15,12 +15,12 @@ import statistics
 
 import dvr_gl
 from dvr_gl import metrics, reference
-from dvr_gl.bench import datasets, interleaved_frames
-from dvr_gl.bench_particles import VIEWS
-from dvr_gl.io import atomic_write
-from dvr_gl.progress import Progress
-from dvr_gl.scene import default_camera
-from dvr_gl.vtk_peer import VTKPeer
+from dvr_gl.bench.raycast import datasets, interleaved_frames
+from dvr_gl.bench.particles import VIEWS
+from dvr_gl.formats import atomic_write
+from dvr_gl.util.progress import Progress
+from dvr_gl.model.scene import default_camera
+from dvr_gl.bench.vtk_peer import VTKPeer
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 VTK_LABEL = "VTK raycast, 1 voxel"

@@ -14,10 +14,10 @@ import numpy as np
 
 import dvr_gl
 from dvr_gl import metrics, reference
-from dvr_gl.inputs import first_camera, load_input, resolve_tf, shading_for
-from dvr_gl.io import atomic_write
-from dvr_gl.progress import Progress
-from dvr_gl.tolerance import PILOT_STEPS, SAFETY, median_seconds
+from dvr_gl.frontends.inputs import first_camera, load_input, resolve_tf, shading_for
+from dvr_gl.formats import atomic_write
+from dvr_gl.util.progress import Progress
+from dvr_gl.rendering.tolerance import PILOT_STEPS, SAFETY, median_seconds
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 DATA = os.environ.get("DVR_GL_DATA", os.path.join(HERE, os.pardir, os.pardir, "shared", "data"))

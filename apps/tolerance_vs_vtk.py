@@ -17,12 +17,12 @@ import numpy as np
 
 import dvr_gl
 from dvr_gl import metrics, reference
-from dvr_gl.bench import datasets, interleaved_frames, oblique_camera
-from dvr_gl.phantoms import marschner_lobb, marschner_lobb_tf
-from dvr_gl.io import atomic_write
-from dvr_gl.progress import Progress
-from dvr_gl.tolerance import REFINE_PARTS
-from dvr_gl.vtk_peer import VTKPeer
+from dvr_gl.bench.raycast import datasets, interleaved_frames, oblique_camera
+from dvr_gl.data.phantoms import marschner_lobb, marschner_lobb_tf
+from dvr_gl.formats import atomic_write
+from dvr_gl.util.progress import Progress
+from dvr_gl.rendering.tolerance import REFINE_PARTS
+from dvr_gl.bench.vtk_peer import VTKPeer
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 STEPS = (1.0, 0.5, 0.25)

@@ -8,7 +8,7 @@ editor along the bottom of the window."""
 
 import sys
 
-from dvr_gl.viewer import main
+from dvr_gl.frontends.viewer import main
 
 if __name__ == "__main__":
     sys.exit(main(sys.argv[1:]))

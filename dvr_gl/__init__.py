@@ -1,9 +1,13 @@
 """dvr_gl: direct volume rendering with OpenGL, headless on llvmpipe or on a GPU,
 checked against NumPy references and an exact float64 integrator."""
 
-from .scene import Camera, Light, Scene, TetMesh, TransferFunction, TransferFunction2D, Volume, default_camera
+from .model.scene import Camera, Light, Scene, TetMesh, TransferFunction, TransferFunction2D, Volume, default_camera
 
 __version__ = "0.1.0"
+
+from . import _compat
+
+_compat.install()
 
 __all__ = ["Camera", "Light", "Renderer", "Scene", "TetMesh", "TransferFunction", "TransferFunction2D", "Volume", "default_camera",
            "metrics", "reference", "render", "__version__"]
@@ -12,12 +16,14 @@ __all__ = ["Camera", "Light", "Renderer", "Scene", "TetMesh", "TransferFunction"
 def __getattr__(name):
     # GL and the references are imported on first use so that `import dvr_gl` stays cheap.
     if name == "Renderer":
-        from .renderer import Renderer
+        from .rendering.renderer import Renderer
         return Renderer
     if name == "render":
-        from .inputs import render
+        from .frontends.inputs import render
         return render
-    if name in ("reference", "metrics", "io", "transfer"):
+    if name in ("reference", "metrics"):
         import importlib
         return importlib.import_module(f".{name}", __name__)
+    if f"{__name__}.{name}" in _compat.MOVED:      # dvr_gl.io and the like, for one release
+        return _compat.moved_module(f"{__name__}.{name}")
     raise AttributeError(f"module 'dvr_gl' has no attribute {name!r}")

@@ -16,11 +16,11 @@ import pytest
 from PIL import Image
 
 import dvr_gl
-from dvr_gl import cli
-from dvr_gl.inputs import first_camera
-from dvr_gl.options import load_input_args
-from dvr_gl.io import load_volume, to_png_array
-from dvr_gl.transfer import auto_preset
+from dvr_gl.frontends import cli
+from dvr_gl.frontends.inputs import first_camera
+from dvr_gl.frontends.options import load_input_args
+from dvr_gl.formats import load_volume, to_png_array
+from dvr_gl.model.transfer import auto_preset
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -88,7 +88,7 @@ def test_render_raw_with_options_and_background(renderer, tiny, capsys):
     mode, px = _png(out)
     assert mode == "RGB" and px.shape == (24, 40, 3)
     vol = dvr_gl.Volume(a, spacing=(1, 1, 2))
-    scene = dvr_gl.Scene(vol, dvr_gl.transfer.load_tf_json(d / "tf.json"),
+    scene = dvr_gl.Scene(vol, dvr_gl.model.transfer.load_tf_json(d / "tf.json"),
                          dvr_gl.default_camera(vol, 30, -20, 1.3), 40, 24, mode="mip")
     assert np.array_equal(px, to_png_array(renderer.render(scene, step=0.25), background=(0, 0, 1)))
     assert px[0, 0].tolist() == [0, 0, 255]  # the background where nothing is
@@ -225,7 +225,7 @@ def test_usage_errors(capsys):
 def test_bad_input_in_a_subprocess_has_no_traceback(tmp_path):
     env = dict(os.environ, PYTHONPATH=ROOT + os.pathsep + os.environ.get("PYTHONPATH", ""))
     env.pop("DVR_GL_DEBUG", None)
-    for module in ("dvr_gl.cli", "dvr_gl"):
+    for module in ("dvr_gl.frontends.cli", "dvr_gl"):
         p = subprocess.run([sys.executable, "-m", module, "render", str(tmp_path / "missing.nrrd"),
                             "--out", str(tmp_path / "x.png")], capture_output=True, text=True, env=env,
                            timeout=60)
@@ -289,16 +289,16 @@ def test_info_reports_failures(capsys, monkeypatch):
 # ============================================================================ demo, bench, view
 
 def test_view_not_available(capsys, monkeypatch):
-    monkeypatch.setitem(sys.modules, "dvr_gl.viewer", None)  # import fails as if absent
+    monkeypatch.setitem(sys.modules, "dvr_gl.frontends.viewer", None)  # import fails as if absent
     code, _, err = _run(["view", "builtin:ct_head"], capsys)
     assert code == 2 and "the interactive viewer is not available yet" in err
 
 
 def test_view_passes_its_arguments(capsys, monkeypatch):
     seen = []
-    fake = types.ModuleType("dvr_gl.viewer")
+    fake = types.ModuleType("dvr_gl.frontends.viewer")
     fake.main = lambda args: seen.append(args) or 0
-    monkeypatch.setitem(sys.modules, "dvr_gl.viewer", fake)
+    monkeypatch.setitem(sys.modules, "dvr_gl.frontends.viewer", fake)
     assert _run(["view", "builtin:ct_head", "--size", "64x64", "--help"], capsys)[0] == 0
     assert seen == [["builtin:ct_head", "--size", "64x64", "--help"]]
     # options before INPUT (and --help alone) reach the viewer too
@@ -309,28 +309,28 @@ def test_view_passes_its_arguments(capsys, monkeypatch):
 
 def test_demo_is_wired(capsys, monkeypatch, tmp_path):
     seen = []
-    fake = types.ModuleType("dvr_gl.demo")
+    fake = types.ModuleType("dvr_gl.frontends.demo")
     fake.run_demo = lambda **kw: seen.append(kw) or 0
-    monkeypatch.setitem(sys.modules, "dvr_gl.demo", fake)
+    monkeypatch.setitem(sys.modules, "dvr_gl.frontends.demo", fake)
     assert _run(["demo", "--out-dir", tmp_path], capsys)[0] == 0
     assert _run(["demo"], capsys)[0] == 0
     assert seen == [{"out_dir": str(tmp_path)}, {}]
-    monkeypatch.setitem(sys.modules, "dvr_gl.demo", None)
+    monkeypatch.setitem(sys.modules, "dvr_gl.frontends.demo", None)
     code, _, err = _run(["demo"], capsys)
     assert code == 2 and "not available" in err
 
 
 def test_bench_is_wired(capsys, monkeypatch):
     seen = []
-    fake = types.ModuleType("dvr_gl.bench")
+    fake = types.ModuleType("dvr_gl.bench.raycast")
     fake.add_arguments = lambda parser: parser.add_argument("--quick", action="store_true")
     fake.run_bench = lambda args: seen.append(args.quick) or 3
-    monkeypatch.setitem(sys.modules, "dvr_gl.bench", fake)
+    monkeypatch.setitem(sys.modules, "dvr_gl.bench.raycast", fake)
     assert _run(["bench", "--quick"], capsys)[0] == 3
     assert seen == [True]
     code, _, err = _run(["bench", "--slow"], capsys)  # the bench's own parser judges
     assert code == 2 and "--slow" in err
-    monkeypatch.setitem(sys.modules, "dvr_gl.bench", None)
+    monkeypatch.setitem(sys.modules, "dvr_gl.bench.raycast", None)
     code, _, err = _run(["bench"], capsys)
     assert code == 2 and "not available" in err
 
@@ -371,7 +371,7 @@ def tiny_mesh(tmp_path):
     """The tiny ramp's grid as a tetrahedral .vtu (a scalar 'ramp' after a vector 'wind'
     and before a scalar 'twice'), and as .npz."""
     import meshio
-    from dvr_gl.cell_split import grid_to_tets
+    from dvr_gl.model.cell_split import grid_to_tets
 
     z, y, x = np.meshgrid(np.arange(4), np.arange(5), np.arange(6), indexing="ij")
     a = (x + 2 * y + 3 * z).astype(np.float32)
@@ -553,7 +553,7 @@ def test_info_names_the_orientation_or_how_to_give_one(tiny, tiny_mesh, tmp_path
 def test_render_and_view_take_an_orientation(renderer, tiny, capsys):
     """--orientation supplies where the axes point: the first view then faces the subject
     (the same picture as the library's for that Volume), in render and in the viewer."""
-    from dvr_gl.viewer import build_parser, settings_from_args
+    from dvr_gl.frontends.viewer import build_parser, settings_from_args
     d, a = tiny
     out = d / "o.png"
     code, stdout, err = _run(["render", d / "tiny.npy", "--orientation", "RIA", "--tf", "warm", "--size", "24x20",
@@ -561,7 +561,7 @@ def test_render_and_view_take_an_orientation(renderer, tiny, capsys):
     assert code == 0, err
     assert "from the front, head up" in stdout
     vol = dvr_gl.Volume(a, orientation="RIA")
-    scene = dvr_gl.Scene(vol, dvr_gl.inputs.PRESETS["warm"](vol), first_camera(vol), 24, 20, shading=True)
+    scene = dvr_gl.Scene(vol, dvr_gl.frontends.inputs.PRESETS["warm"](vol), first_camera(vol), 24, 20, shading=True)
     assert np.array_equal(_png(out)[1], to_png_array(renderer.render(scene)))
     code, _, err = _run(["render", d / "tiny.npy", "--orientation", "up", "--out", out], capsys)
     assert code == 2 and "argument --orientation" in err and "'up'" in err, err
@@ -582,7 +582,7 @@ def test_mesh_bench_quick_run(tmp_path, capsys):
     both sorts and VTK, dvr_gl's error far below 1e-3 and below VTK's, the CPU
     classification timed, results written."""
     pytest.importorskip("vtk")
-    from dvr_gl import bench
+    from dvr_gl.bench import raycast as bench
     parser = argparse.ArgumentParser()
     bench.add_arguments(parser)
     args = parser.parse_args(["--suite", "mesh", "--quick", "--datasets", "ball", "--out", str(tmp_path / "m")])
@@ -628,7 +628,7 @@ def test_render_particles_on_a_grid_and_a_mesh(renderer, tiny, tiny_mesh, capsys
 def _quick_bench(tmp_path, suite, *extra):
     """``dvr-gl bench --suite SUITE --quick`` with ``extra`` options, writing under
     tmp_path; returns (stdout, rows of the csv)."""
-    from dvr_gl import bench
+    from dvr_gl.bench import raycast as bench
     parser = argparse.ArgumentParser()
     bench.add_arguments(parser)
     args = parser.parse_args(["--suite", suite, "--quick", *extra, "--out", str(tmp_path / suite)])
@@ -649,7 +649,7 @@ def test_particles_bench_quick_run(tmp_path, capsys):
                                                  "VTK raycast 1 voxel"]
     assert float(rows[1]["rmse"]) < float(rows[0]["rmse"]) and int(rows[0]["particles"]) > 0
     assert float(rows[4]["rmse"]) < float(rows[3]["rmse"])          # splat: density 2 is closer to exact
-    from dvr_gl import bench
+    from dvr_gl.bench import raycast as bench
     parser = argparse.ArgumentParser()
     bench.add_arguments(parser)
     assert bench.run_bench(parser.parse_args(["--suite", "particles", "--repetitions-list", "0,4"])) == 2
@@ -690,7 +690,7 @@ def test_all_techniques_bench_quick_run(tmp_path, capsys):
     the VTK peers beside them, all files written, the Pareto front marked, the GPU memory
     counted, errors falling with each technique's quality parameter."""
     pytest.importorskip("vtk")
-    from dvr_gl import bench, bench_all
+    from dvr_gl.bench import raycast as bench, all as bench_all
     parser = argparse.ArgumentParser()
     bench.add_arguments(parser)
     args = parser.parse_args(["--suite", "all", "--quick", "--size", "64", "--out", str(tmp_path / "all")])
@@ -717,14 +717,14 @@ def test_all_techniques_bench_quick_run(tmp_path, capsys):
 
 
 def test_pareto_front():
-    from dvr_gl.bench_all import pareto
+    from dvr_gl.bench.all import pareto
     rows = [{"scene": "a", "ms_median": t, "rmse": e} for t, e in ((1, 5), (2, 3), (3, 4), (4, 1), (2, 3.5))]
     rows.append({"scene": "b", "ms_median": 9, "rmse": 9})
     assert [(r["ms_median"], r["rmse"]) for r in pareto(rows)] == [(1, 5), (2, 3), (4, 1), (9, 9)]
 
 
 def test_info_file_shows_a_histogram_and_the_preset(tiny, tiny_mesh, capsys):
-    from dvr_gl.cli import text_histogram
+    from dvr_gl.frontends.cli import text_histogram
     d, _ = tiny
     code, out, err = _run(["info", d / "tiny.npy"], capsys)
     assert code == 0, err

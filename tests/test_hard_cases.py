@@ -16,7 +16,8 @@ import numpy as np
 import pytest
 
 import dvr_gl
-from dvr_gl import metrics, phantoms, reference
+from dvr_gl import metrics, reference
+from dvr_gl.data import phantoms
 
 TABLE = []
 U32 = 2.0 ** -24
@@ -353,7 +354,7 @@ def test_images_larger_than_one_target_render_in_tiles(renderer, data, technique
 
 
 def test_tiles_cover_the_image_once():
-    from dvr_gl.renderer import tiles
+    from dvr_gl.rendering.renderer import tiles
     for width, height, edge in ((101, 83, 40), (16384, 16384, 3838), (1, 1, 16), (4097, 5, 4096)):
         cover = np.zeros((height, width), np.int32)
         for x, y, w, h in tiles(width, height, edge):
@@ -363,8 +364,8 @@ def test_tiles_cover_the_image_once():
 
 
 def test_too_large_for_memory_is_a_named_error_before_any_work(renderer, monkeypatch, capsys):
-    from dvr_gl import renderer as renderer_module
-    from dvr_gl.cli import main
+    from dvr_gl.rendering import renderer as renderer_module
+    from dvr_gl.frontends.cli import main
     monkeypatch.setattr(renderer_module, "available_memory", lambda: 2 ** 30)
     vol, tf = phantoms.marschner_lobb(9), phantoms.marschner_lobb_tf()
     scene = dvr_gl.Scene(vol, tf, dvr_gl.default_camera(vol), width=16384, height=16384)
@@ -407,7 +408,7 @@ MESH_TF = dvr_gl.TransferFunction(color=[(-1, 1, 0, 0), (2, 0, 0, 1)], opacity=[
 def _lattice():
     """A 4^3 grid's Kuhn tetrahedralisation: views along the axes put pixel rays exactly
     in shared faces and along edges, through vertices."""
-    from dvr_gl.cell_split import grid_to_tets
+    from dvr_gl.model.cell_split import grid_to_tets
     z, y, x = np.mgrid[0:4, 0:4, 0:4].astype(np.float32)
     return grid_to_tets(dvr_gl.Volume((x + 2 * y + 3 * z) / 18.0, spacing=(1.0, 1.0, 1.0)))
 
@@ -501,12 +502,12 @@ def _valid_files(folder):
 
 def test_truncated_and_corrupted_files_give_named_errors(tmp_path_factory):
     """Every loader, on its valid file cut short at any byte or with any byte changed,
-    either loads (the change was harmless) or raises dvr_gl.io.InputError naming the
+    either loads (the change was harmless) or raises dvr_gl.formats.InputError naming the
     field (or, where the bytes read fine but hold a NaN, the Volume's own error naming
     "data"); nothing else escapes (hypothesis explores the cuts and the changes)."""
     from hypothesis import HealthCheck, given, settings
     from hypothesis import strategies as st
-    from dvr_gl import io as dvr_io
+    from dvr_gl import formats as dvr_io
     folder = tmp_path_factory.mktemp("fuzz")
     files = _valid_files(folder)
     outcomes = {"loaded": 0, "named error": 0}

@@ -14,7 +14,7 @@ import dvr_gl
 from dvr_gl import metrics, reference
 from dvr_gl.reference.common import box_rays
 from dvr_gl.reference.shading import depth_range
-from dvr_gl.scene import ILLUSTRATION_TERMS
+from dvr_gl.model.scene import ILLUSTRATION_TERMS
 from dvr_gl.techniques import get_technique
 
 from test_raycast import derived_tolerance

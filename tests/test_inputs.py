@@ -1,4 +1,4 @@
-"""dvr_gl.inputs: what the command line, the viewer and dvr_gl.render share, and the
+"""dvr_gl.frontends.inputs: what the command line, the viewer and dvr_gl.render share, and the
 one-line dvr_gl.render."""
 
 import os
@@ -8,9 +8,9 @@ import pytest
 from PIL import Image
 
 import dvr_gl
-from dvr_gl import inputs
-from dvr_gl.io import InputError
-from dvr_gl.transfer import auto_preset
+from dvr_gl.frontends import inputs
+from dvr_gl.formats import InputError
+from dvr_gl.model.transfer import auto_preset
 
 SHARED_DATA = os.environ.get("DVR_GL_DATA") or os.path.join(
     os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))), "shared", "data")
@@ -67,7 +67,7 @@ def test_the_first_view_is_oblique_and_faces_an_oriented_subject():
     """No angles: an oblique view (azimuth 30, elevation 20) in the data's frame; for a
     volume with an anatomical orientation that frame has the eye in front of the face and
     the head up, whichever way the axes run."""
-    from dvr_gl.inputs import first_camera
+    from dvr_gl.frontends.inputs import first_camera
     data = np.zeros((6, 7, 8), np.float32)
     plain = dvr_gl.Volume(data)
     cam = first_camera(plain)
@@ -100,7 +100,7 @@ def test_every_shared_file_renders_in_colour_with_no_options(tmp_path, capsys):
     """`dvr-gl render FILE -o OUT` (only a small size given, for time) on every volume and
     mesh file the contact sheet shows: exit 0, something drawn, in colour, lit where the
     technique lights."""
-    from dvr_gl import cli
+    from dvr_gl.frontends import cli
     files = _first_pictures_app().data_files(SHARED_DATA)
     assert len(files) >= 15
     for path in files:
@@ -118,7 +118,7 @@ def test_every_shared_file_renders_in_colour_with_no_options(tmp_path, capsys):
 
 
 def test_auto_picks_the_preset_the_data_suggests():
-    from dvr_gl.transfer import auto_preset_name
+    from dvr_gl.model.transfer import auto_preset_name
     rng = np.random.default_rng(2)
     hu = dvr_gl.Volume(rng.integers(-1000, 1500, (8, 9, 10)).astype(np.int16))
     mri = dvr_gl.Volume(rng.random((8, 9, 10)).astype(np.float32) * 300, orientation="RAS")
@@ -147,9 +147,9 @@ def test_a_mesh_file_renders_its_first_field_not_a_flag(tmp_path):
     path = tmp_path / "flagged.vtu"
     meshio.write(str(path), meshio.Mesh(points, cells, point_data={
         "IBlank": np.array([1, 1, 1, 0, -1], float), "Density": np.array([0.1, 0.5, 0.9, 1.3, 2.0])}))
-    mesh = dvr_gl.io.load_mesh(path)
+    mesh = dvr_gl.formats.load_mesh(path)
     assert mesh.scalars_name == "Density" and mesh.scalars.tolist() == [0.1, 0.5, 0.9, 1.3, 2.0]
-    assert dvr_gl.io.load_mesh(path, scalars="IBlank").scalars_name == "IBlank"
+    assert dvr_gl.formats.load_mesh(path, scalars="IBlank").scalars_name == "IBlank"
 
 
 def test_an_unknown_option_names_the_techniques_options(renderer):
@@ -164,7 +164,7 @@ def test_an_unknown_option_names_the_techniques_options(renderer):
 
 
 def test_an_iso_value_outside_the_data_warns(tmp_path, capsys):
-    from dvr_gl import cli
+    from dvr_gl.frontends import cli
     vol = dvr_gl.Volume(np.random.default_rng(1).random((5, 6, 7)).astype(np.float32))
     with pytest.warns(UserWarning, match="iso 7 is outside the data's range"):
         dvr_gl.render(vol, mode="isosurface", iso=7.0, size=16)
@@ -189,7 +189,7 @@ def test_8bit_ct_preset_is_the_hu_preset_through_the_window(kind, window):
     position (a few ulps of 255, about 1e-13) times the largest slope in stored units
     (the presets change by at most 1 over 100 HU, times (hi - lo) / 255 HU per stored unit
     <= 16 for these windows): below 1e-11."""
-    from dvr_gl.transfer import CT_8BIT_WINDOWS, ct_8bit_preset, ct_preset, stored_to_hu
+    from dvr_gl.model.transfer import CT_8BIT_WINDOWS, ct_8bit_preset, ct_preset, stored_to_hu
     data = dvr_gl.Volume(np.random.default_rng(4).integers(0, 256, (6, 7, 8)).astype(np.uint8), spacing=(2, 1, 3))
     tf8 = ct_8bit_preset(data, kind, window)
     hu_tf = ct_preset(data, kind[:-len("_8bit")])
@@ -205,7 +205,7 @@ def test_8bit_ct_preset_is_the_hu_preset_through_the_window(kind, window):
 
 
 def test_8bit_ct_windows_named_and_their_errors():
-    from dvr_gl.transfer import CT_8BIT_WINDOWS, ct_8bit_preset
+    from dvr_gl.model.transfer import CT_8BIT_WINDOWS, ct_8bit_preset
     eight = dvr_gl.Volume(np.arange(2 * 3 * 256, dtype=np.int64).reshape(2, 3, 256).astype(np.uint8))
     assert CT_8BIT_WINDOWS["ct_bone_8bit"] == (-500, 1300) and CT_8BIT_WINDOWS["ct_lung_8bit"] == (-1350, 150)
     name, tf = inputs.resolve_tf("ct_8bit:-160,240", eight)          # the window the data was made with
@@ -231,7 +231,7 @@ def test_8bit_ct_windows_named_and_their_errors():
 def test_auto_picks_the_8bit_ct_preset_from_the_modality():
     """8-bit data is taken for windowed CT only when its metadata says CT: an MRI or a
     microscope stack has most samples at 0 too."""
-    from dvr_gl.transfer import auto_preset_name
+    from dvr_gl.model.transfer import auto_preset_name
     rng = np.random.default_rng(6)
     samples = np.where(rng.random((8, 9, 10)) < 0.8, 0, rng.integers(1, 256, (8, 9, 10))).astype(np.uint8)
     ct = dvr_gl.Volume(samples, modality="CT")
@@ -256,7 +256,7 @@ def test_the_shared_8bit_chest_ct_under_its_presets():
     """LIDC2, a chest CT windowed to 0..255 (most samples clipped to 0): the plain 8-bit
     preset leaves stored 0 (air, lungs) clear; under the usual soft-tissue window the HU
     preset's skin veil would fill the box."""
-    from dvr_gl.transfer import ct_8bit_preset
+    from dvr_gl.model.transfer import ct_8bit_preset
     vol, _ = inputs.load_input(os.path.join(SHARED_DATA, "vtkjs_lidc2_ct", "LIDC2_256x256x133_uint8.raw.gz"))
     assert vol.data.dtype == np.uint8 and (vol.data == 0).mean() > 0.8
     assert inputs.PRESETS["ct_8bit"](vol).opacity(0.0) == 0.0
@@ -323,7 +323,7 @@ def test_left_handed_data_is_not_drawn_mirrored(renderer, left, right):
 
 @pytest.mark.skipif(not os.path.isdir(SHARED_DATA), reason="the shared data folder is not beside the checkout")
 def test_a_file_with_a_left_handed_orientation_loads_reversed_in_x():
-    from dvr_gl import io
+    from dvr_gl import formats as io
     path = os.path.join(SHARED_DATA, "vtk_headsq_quarter", "quarter.nhdr")
     plain = io.load_volume(path, orientation="RPI")         # right-handed: as stored
     given = io.load_volume(path, orientation="LPI")

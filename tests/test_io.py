@@ -1,4 +1,4 @@
-"""dvr_gl.io and dvr_gl.data: volume loading (every format, every bad input), PNG writing
+"""dvr_gl.formats and dvr_gl.data: volume loading (every format, every bad input), PNG writing
 (un-premultiplying, background compositing, rounding, atomic writes), the CLI parsers,
 and the bundled data sets. No GL."""
 
@@ -14,7 +14,7 @@ from PIL import Image
 
 import dvr_gl
 from dvr_gl import data
-from dvr_gl.io import (InputError, MissingFileError, load_volume, parse_orientation, parse_size, parse_triplet,
+from dvr_gl.formats import (InputError, MissingFileError, load_volume, parse_orientation, parse_size, parse_triplet,
                        save_png, to_png_array)
 
 SHARED = os.environ.get("DVR_GL_DATA") or os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),

@@ -1,6 +1,6 @@
 """Mesh input: splitting hexahedra, wedges and pyramids into tetrahedra conformingly
-(dvr_gl.cell_split), grids as tetrahedral meshes, and reading mesh files
-(dvr_gl.io.load_mesh) with clear errors for what cannot be rendered."""
+(dvr_gl.model.cell_split), grids as tetrahedral meshes, and reading mesh files
+(dvr_gl.formats.load_mesh) with clear errors for what cannot be rendered."""
 
 import itertools
 import os
@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 import dvr_gl
-from dvr_gl import cell_split
-from dvr_gl.io import InputError, MissingFileError, is_mesh_file, load_mesh, point_arrays
-from dvr_gl.transfer import auto_preset
+from dvr_gl.model import cell_split
+from dvr_gl.formats import InputError, MissingFileError, is_mesh_file, load_mesh, point_arrays
+from dvr_gl.model.transfer import auto_preset
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DATA = os.environ.get("DVR_GL_DATA") or os.path.join(os.path.dirname(ROOT), "shared", "data")

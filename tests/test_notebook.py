@@ -18,8 +18,8 @@ import pytest
 from PIL import Image
 
 import dvr_gl
-from dvr_gl import io as dvr_io
-from dvr_gl.notebook import RenderedImage, VolumeWidget
+from dvr_gl import formats as dvr_io
+from dvr_gl.frontends.notebook import RenderedImage, VolumeWidget
 
 
 def _decode(png):
@@ -170,7 +170,7 @@ def test_widget_in_jupyterlab_in_chromium(jupyterlab):
     sync_api = pytest.importorskip("playwright.sync_api", reason="the browser test needs the dev extra (playwright)")
     assert CHROMIUM, "Chromium is not installed: scripts/test.sh installs it (apt package chromium)"
     cells = [
-        "import dvr_gl\nfrom dvr_gl.notebook import VolumeWidget\n"
+        "import dvr_gl\nfrom dvr_gl.frontends.notebook import VolumeWidget\n"
         "image = dvr_gl.render('builtin:ct_head', size=(96, 64))\nimage",
         "w = VolumeWidget('builtin:ct_head', size=160)\nw",
         "import hashlib, json, numpy as np\n"

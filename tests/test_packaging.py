@@ -71,7 +71,7 @@ def test_a_real_dataset_renders(renderer):
     import gzip
     raw = gzip.open(SHARED / "vtkjs_lidc2_ct" / "LIDC2_256x256x133_uint8.raw.gz").read()
     vol = dvr_gl.Volume(np.frombuffer(raw, np.uint8).reshape(133, 256, 256), spacing=(1.40625, 1.40625, 2.5))
-    from dvr_gl.transfer import auto_preset
+    from dvr_gl.model.transfer import auto_preset
     scene = dvr_gl.Scene(vol, auto_preset(vol), dvr_gl.default_camera(vol, azimuth=30), width=64, height=64)
     image = renderer.render(scene)
     ref = dvr_gl.reference.render(scene)

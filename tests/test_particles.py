@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 
 import dvr_gl
-from dvr_gl import Camera, Scene, TransferFunction, Volume, particles as pbvr
+from dvr_gl import Camera, Scene, TransferFunction, Volume
+from dvr_gl.techniques import particle_sets as pbvr
 from dvr_gl import data as bundled
 from dvr_gl.techniques import particles as technique
 
@@ -149,7 +150,7 @@ def test_thinning_gives_the_density():
 def test_grid_and_its_tetrahedralisation_agree_within_noise(renderer):
     """A linear field is the same function on the grid and on its Kuhn tetrahedra, so both
     particle images estimate the same exact image: they differ by their two noises."""
-    from dvr_gl.cell_split import grid_to_tets
+    from dvr_gl.model.cell_split import grid_to_tets
     n = 9
     z, y, x = np.meshgrid(*(np.linspace(0, 1, n),) * 3, indexing="ij")
     vol = Volume(0.2 + 0.5 * x + 0.3 * z, spacing=(1.0, 1.0, 1.0))

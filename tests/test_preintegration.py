@@ -1,4 +1,4 @@
-"""Pre-integration tables (dvr_gl.preintegration) and their GLSL twin.
+"""Pre-integration tables (dvr_gl.model.preintegration) and their GLSL twin.
 
 The oracle is ``exact_segment``: nested adaptive quadrature (scipy quad) of the
 definition, sharing no code with the table. The table's float64 values at the nodes
@@ -14,7 +14,7 @@ import pytest
 import dvr_gl
 from dvr_gl.gl import harness
 from dvr_gl.gl.programs import linear_filter_is_exact
-from dvr_gl.preintegration import (OPAQUE_SENTINEL, TABLE_SIZE, PreintegrationTable, build_table,
+from dvr_gl.model.preintegration import (OPAQUE_SENTINEL, TABLE_SIZE, PreintegrationTable, build_table,
                                    exact_segment, length_correction_error, mean_extinction, opacity_support)
 
 U32 = 2.0 ** -24

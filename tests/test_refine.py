@@ -42,7 +42,7 @@ def test_preintegrated_occupancy_counts_a_spike_between_table_nodes():
     """A spike narrower than a table cell, just beyond a brick's range, still marks the
     brick occupied (the table's bilinear nodes reach it)."""
     volume = dvr_gl.Volume(np.full((10, 10, 10), 10.0, np.float32))
-    table = raycast.preintegration_table(_scene(volume=volume), 1.0, dvr_gl.cache.TableCache())
+    table = raycast.preintegration_table(_scene(volume=volume), 1.0, dvr_gl.util.cache.TableCache())
     cell = 1.0 / table.scale
     near = dvr_gl.TransferFunction(color=[(0, 1, 1, 1), (100, 1, 1, 1)],
                                    opacity=[(0, 0.0), (10 + 0.5 * cell, 0.0), (10 + 0.6 * cell, 0.5),

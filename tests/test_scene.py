@@ -267,7 +267,7 @@ def test_volume_orientation_rejects(codes):
 
 
 def test_volume_orientation_and_its_frame():
-    from dvr_gl.scene import anatomical_frame
+    from dvr_gl.model.scene import anatomical_frame
     assert dvr_gl.Volume(DATA).orientation is None and anatomical_frame(dvr_gl.Volume(DATA)) is None
     v = dvr_gl.Volume(DATA, orientation="lpi")
     assert v.orientation == "LPI"

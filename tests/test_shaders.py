@@ -14,7 +14,7 @@ from dvr_gl.gl.programs import ShaderSourceError, apply_defines, build_source, r
 from dvr_gl.reference import common
 from dvr_gl.reference.raycast import refine_iso_bisection
 from dvr_gl.reference.shading import gradient, shade_blinn_phong
-from dvr_gl.transfer import LookupTable
+from dvr_gl.model.transfer import LookupTable
 
 U32 = 2.0 ** -24
 

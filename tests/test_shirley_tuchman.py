@@ -1,15 +1,15 @@
-"""Shirley-Tuchman classification (dvr_gl.shirley_tuchman) against independent float64
+"""Shirley-Tuchman classification (dvr_gl.techniques.shirley_tuchman) against independent float64
 geometry: each cell's triangles tile its projected convex hull (scipy) exactly once, and
 every triangle vertex's front/back distances are those of the pixel ray through it
 clipped against the cell's four planes (computed here from the points, not from
-dvr_gl.mesh), with the cell's linear field's values there."""
+dvr_gl.model.mesh), with the cell's linear field's values there."""
 
 import numpy as np
 import pytest
 from scipy.spatial import ConvexHull, QhullError
 
 from dvr_gl import Camera, Scene, TetMesh, TransferFunction
-from dvr_gl.shirley_tuchman import classify, project
+from dvr_gl.techniques.shirley_tuchman import classify, project
 from dvr_gl.techniques.common import data_projection
 
 CUBE = np.array([[x, y, z] for z in (0, 1) for y in (0, 1) for x in (0, 1)], float)

@@ -399,7 +399,7 @@ def test_slice2d_against_vtk_at_one_voxel(renderer):
     here), so it takes interpolate=3 to be more accurate in every scene. The README and
     the closing note give the numbers."""
     pytest.importorskip("vtk", reason="VTK is an optional extra (pip install 'dvr-gl[bench]')")
-    from dvr_gl.vtk_peer import VTKPeer
+    from dvr_gl.bench.vtk_peer import VTKPeer
     peer = VTKPeer()
     try:
         for name, scene in _accuracy_scenes().items():

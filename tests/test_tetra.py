@@ -14,7 +14,7 @@ import pytest
 
 import dvr_gl
 from dvr_gl import Camera, Scene, TetMesh, TransferFunction
-from dvr_gl import mesh as M
+from dvr_gl.model import mesh as M
 from dvr_gl.reference.common import ray_box
 from dvr_gl.reference.linear_segment import SegmentKnots, linear_segment
 from dvr_gl.reference.mesh_rays import ray_tet_segments
@@ -316,7 +316,7 @@ def test_segment_integral_against_independent_quadrature():
     """The NumPy twin against preintegration.exact_segment (nested adaptive quadrature, no
     shared code): random segments crossing knots either way, thin and long, and opacity
     reaching 1 inside a segment (the contract's end-of-ray rule)."""
-    from dvr_gl.preintegration import exact_segment
+    from dvr_gl.model.preintegration import exact_segment
     tf = TransferFunction([(0, 1, 0, 0), (0.5, 0, 1, 0), (1, 0, 0, 1)],
                           [(0, 0.0), (0.4, 0.6), (0.6, 0.2), (1, 0.9)], unit_distance=0.5)
     rng = np.random.default_rng(1)
@@ -357,7 +357,7 @@ def test_grid_and_its_tetrahedralisation_agree_within_interpolation():
     a linear field is the same function both ways, so the images are equal (exact: to
     rounding; GL tetra: within its float32 bound); for a curved field the two interpolants
     differ by O(h^2), and so do the images: halving the spacing quarters the difference."""
-    from dvr_gl.cell_split import grid_to_tets
+    from dvr_gl.model.cell_split import grid_to_tets
     cam = Camera((2.6, 1.9, 3.3), (0.5, 0.5, 0.5), fov=35)
 
     def field(n, f):

@@ -9,9 +9,9 @@ import pytest
 import dvr_gl
 from dvr_gl import data as bundled
 from dvr_gl import metrics, reference
-from dvr_gl import tolerance
-from dvr_gl.phantoms import marschner_lobb, marschner_lobb_tf
-from dvr_gl.tolerance import MAX_STEP, SAFETY, ErrorModel, error_model, measure
+from dvr_gl.rendering import tolerance
+from dvr_gl.data.phantoms import marschner_lobb, marschner_lobb_tf
+from dvr_gl.rendering.tolerance import MAX_STEP, SAFETY, ErrorModel, error_model, measure
 
 from test_shading import RAMP, TF, cameras
 
@@ -45,7 +45,7 @@ def test_the_chosen_step_meets_the_tolerance_and_is_not_needlessly_fine(renderer
 
 
 def test_the_pilot_is_reused_and_the_choice_is_readable(renderer, monkeypatch):
-    import dvr_gl.tolerance as tol
+    import dvr_gl.rendering.tolerance as tol
     scene = scenes()["marschner_lobb"]
     # one way of sampling throughout: the fastest way is a timing call (a GPU took
     # pre-integration at 2e-3), and each way keeps its own pilot and model
@@ -217,7 +217,7 @@ def test_an_interpolated_step_is_checked_on_the_pilot():
 
     scene = scenes()["marschner_lobb"]
     voxel = scene.volume.min_spacing
-    from dvr_gl.tolerance import verified
+    from dvr_gl.rendering.tolerance import verified
     model = measure(render, scene)
     assert model.predict(1.3) < SAFETY * 3e-3          # the curve alone would take ~1.3 voxel
     calls.clear()

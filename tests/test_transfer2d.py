@@ -15,7 +15,7 @@ import dvr_gl
 from dvr_gl import metrics, reference
 from dvr_gl.reference.shading import gradient_max
 from dvr_gl.techniques import get_technique
-from dvr_gl.transfer2d import (Rectangle, Triangle, from_widgets, levoy_isocontours, levoy_region_boundaries,
+from dvr_gl.model.transfer2d import (Rectangle, Triangle, from_widgets, levoy_isocontours, levoy_region_boundaries,
                                load_tf2d_json)
 
 from test_raycast import cameras
@@ -312,7 +312,7 @@ def test_optical_models_and_illustration_terms_take_a_2d_function(renderer, chan
 
 
 def test_cli_renders_a_2d_json_file(tmp_path):
-    from dvr_gl.cli import main
+    from dvr_gl.frontends.cli import main
     out = tmp_path / "head2d.png"
     spec = os.path.join(os.path.dirname(__file__), os.pardir, "docs", "tf", "ct_skin_bone_2d.json")
     assert main(["render", "builtin:ct_head", "--tf", spec, "--size", "48x40",

@@ -28,15 +28,17 @@ import pytest
 from PIL import Image
 
 import dvr_gl
-from dvr_gl.inputs import first_camera
+from dvr_gl.frontends.inputs import first_camera
 import dvr_gl.techniques.raycast
-from dvr_gl import cli, data, transfer
-from dvr_gl import io as dvr_io
+from dvr_gl.frontends import cli
+from dvr_gl import data
+from dvr_gl.model import transfer
+from dvr_gl import formats as dvr_io
 from dvr_gl.gl.context import current
 from dvr_gl.techniques import names as technique_names
 
-viewer_mod = pytest.importorskip("dvr_gl.viewer")
-from dvr_gl.viewer import (KEY_COMMA, KEY_EQUAL, KEY_MINUS, KEY_PERIOD, KEY_RIGHT_BRACKET, MOD_CONTROL,  # noqa: E402
+viewer_mod = pytest.importorskip("dvr_gl.frontends.viewer")
+from dvr_gl.frontends.viewer import (KEY_COMMA, KEY_EQUAL, KEY_MINUS, KEY_PERIOD, KEY_RIGHT_BRACKET, MOD_CONTROL,  # noqa: E402
                            MOD_SHIFT, MOUSE_LEFT, MOUSE_MIDDLE, MOUSE_RIGHT, PRESS, RELEASE, key_code)
 
 from test_raycast import derived_tolerance  # noqa: E402  (the ray caster's float32 bound)
@@ -834,7 +836,7 @@ def test_window_opens_after_a_headless_egl_context(display, tmp_path):
             "    ctx.release()\n"
             "except Exception as e:\n"
             "    print('no egl', e)\n"
-            "from dvr_gl import viewer\n"
+            "from dvr_gl.frontends import viewer\n"
             "v = viewer.open_viewer(['builtin:synthetic', '--size', '32x32'])\n"
             "v.refine()\n"
             "print('frame', v.last_frame.quality)\n"
@@ -900,7 +902,7 @@ def test_mesh_opens_with_tetra_and_shows_the_ball(mesh_viewer):
     shown = _ball_region(pixels, top)
     assert shown.max() > 100 and (shown.max(axis=2) > 20).mean() > 0.03
     # the editor's histogram counts the mesh's point scalars
-    from dvr_gl.viewer_overlay import data_histogram
+    from dvr_gl.frontends.viewer_overlay import data_histogram
     e = v.editor
     assert e.lo <= v.volume.data_range[0] and e.hi >= v.volume.data_range[1]
     assert np.allclose(e.histogram, data_histogram(v.volume, e.lo, e.hi)) and e.histogram.max() == 1.0

@@ -1,4 +1,4 @@
-"""The VTK peer (``dvr_gl.vtk_peer``) against closed forms.
+"""The VTK peer (``dvr_gl.bench.vtk_peer``) against closed forms.
 
 VTK is an optional extra ("bench"): these tests skip only when ``vtk`` cannot be
 imported. If VTK imports but cannot render headless, they fail.
@@ -11,7 +11,7 @@ pytest.importorskip("vtk", reason="VTK is an optional extra (pip install 'dvr-gl
 
 from dvr_gl import Camera, Scene, TransferFunction, Volume, default_camera  # noqa: E402
 from dvr_gl.reference.common import ray_box  # noqa: E402
-from dvr_gl.vtk_peer import VTKPeer  # noqa: E402
+from dvr_gl.bench.vtk_peer import VTKPeer  # noqa: E402
 
 COLOUR = np.array([1.0, 0.5, 0.25])
 
@@ -135,7 +135,7 @@ def test_isosurface_facing_the_camera(peer):
     # A plane z = const seen head-on: colour c(v) * (ka + kd) + ks, opacity 1, where the
     # normal is along the ray. Only the central pixels are compared: VTK lights from a
     # point at the camera position and uses Phong's (R.V)^n, so off-axis pixels differ
-    # from the contract's headlight Blinn-Phong (see dvr_gl.vtk_peer).
+    # from the contract's headlight Blinn-Phong (see dvr_gl.bench.vtk_peer).
     n = 21
     z = (np.arange(n) * 10).astype(np.float32)
     vol = Volume(np.broadcast_to(z[::-1, None, None], (n, n, n)).copy())
@@ -170,7 +170,7 @@ def test_bench_quick_smoke(renderer, tmp_path, monkeypatch, capsys):
     import argparse
     import json
 
-    from dvr_gl import bench
+    from dvr_gl.bench import raycast as bench
 
     monkeypatch.setenv("DVR_GL_CACHE", str(tmp_path / "cache"))
     parser = bench.add_arguments(argparse.ArgumentParser())
@@ -196,7 +196,7 @@ def test_bench_quick_smoke(renderer, tmp_path, monkeypatch, capsys):
 # -- meshes: VTK's projected tetrahedra (vtkProjectedTetrahedraMapper) ----------------
 
 from dvr_gl import TetMesh  # noqa: E402
-from dvr_gl.vtk_peer import render_vtk_mesh  # noqa: E402
+from dvr_gl.bench.vtk_peer import render_vtk_mesh  # noqa: E402
 
 # The unit cube's corners, index = x + 2y + 4z, split into 6 tetrahedra round the main
 # diagonal 0-7 (one per order in which a path from 0 to 7 steps along x, y and z).
@@ -403,7 +403,7 @@ def test_mesh_linear_field_error_falls_with_cell_size(peer):
 def test_equal_error_and_time_reads_the_skipping_ray_caster_only():
     """The interpolation runs along dvr_gl raycast+skip's steps; other dvr_gl rows (the
     tolerance points, the adaptive curve) do not bend it."""
-    from dvr_gl import bench
+    from dvr_gl.bench import raycast as bench
 
     def row(renderer, kind, step, ms, rmse):
         return {"dataset": "d", "renderer": renderer, "kind": kind, "skip_empty": kind != "vtk",

@@ -59,7 +59,7 @@ import os
 
 import numpy as np
 
-from ..scene import Scene
+from ..model.scene import Scene
 from .common import ray_box
 from .shading import gradient, gradient_epsilon, sample_terms, scene_lights, shade_blinn_phong
 
@@ -936,7 +936,7 @@ def _progress(steps, scene):
     """A progress bar for exact images of more than a few blocks of rays (seconds)."""
     if steps < 4:
         return None
-    from ..progress import Progress
+    from ..util.progress import Progress
     return Progress(steps)
 
 
@@ -1015,7 +1015,7 @@ def exact(scene, cache=True, cache_dir=None) -> np.ndarray:
     with np.errstate(divide="ignore", invalid="ignore", over="ignore", under="ignore"):
         img = _render(scene)
     if path is not None:
-        from ..io import atomic_write
+        from ..formats import atomic_write
         os.makedirs(directory, exist_ok=True)
         buffer = io.BytesIO()
         np.save(buffer, img)

@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from ..scene import MAX_LIGHTS, OPTICAL_MODELS, Scene
+from ..model.scene import MAX_LIGHTS, OPTICAL_MODELS, Scene
 
 TARGETS = {"rgba32f": "f4", "rgba16f": "f2", "rgba8": "f1"}
 
@@ -117,7 +117,7 @@ def preintegration_applies(scene):
 def preintegration_table(scene, step, tables):
     """The scene's pre-integrated table for segments ``step`` long (built once per TF,
     value range and step)."""
-    from ..preintegration import ZERO_LENGTH, build_table
+    from ..model.preintegration import ZERO_LENGTH, build_table
     if scene.optical_model != "emission_absorption":
         raise ValueError(f"preintegrate tables emission-absorption segments; optical_model "
                          f"{scene.optical_model!r} is sampled at segment midpoints (preintegrate=False)")

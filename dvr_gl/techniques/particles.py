@@ -1,6 +1,6 @@
 """Particle-based volume rendering (PBVR; Sakamoto and Koyamada 2007, Kawamura et al.
 2010 for tetrahedra): the field becomes opaque spheres whose density follows the
-transfer function's extinction (``dvr_gl.particles`` derives it), and GL draws them with
+transfer function's extinction (``dvr_gl.techniques.particle_sets`` derives it), and GL draws them with
 a depth test only: no visibility order and no blending. The first sphere each pixel's
 ray meets gives the pixel its colour; averaged over ``repetitions`` independent particle
 sets, the image converges to the emission-absorption integral (noise falling like
@@ -37,11 +37,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .. import particles as pbvr
-from ..cache import TableCache
+from . import particle_sets as pbvr
+from ..util.cache import TableCache
 from ..gl.context import current
-from ..progress import Progress
-from ..scene import Scene
+from ..util.progress import Progress
+from ..model.scene import Scene
 from .common import (cleared_target, SizedTarget, bind, camera_uniforms, check_scene, check_target, data_projection,
                      point_shading_defines, sample_term_uniforms)
 

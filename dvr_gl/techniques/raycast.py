@@ -48,7 +48,7 @@ skip_empty : empty-space skipping (composite mode only). The volume is cut into 
     which the per-sample skip would have passed over one SIMD group at a time. With the
     eye inside or nearly on the box the pass is left out.
 preintegrate : composite mode: classify each segment as a whole from the field at its two
-    ends with the pre-integrated table (``dvr_gl.preintegration``; its segment length is
+    ends with the pre-integrated table (``dvr_gl.model.preintegration``; its segment length is
     the step, and the shorter first and last segments are corrected as that module
     says) instead of one midpoint sample.
 refine : 1 (default) or an integer from 2 to 64, with ``preintegrate=True``: adaptive
@@ -91,9 +91,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..cache import TableCache
-from ..scene import Scene
-from ..transfer import LookupTable
+from ..util.cache import TableCache
+from ..model.scene import Scene
+from ..model.transfer import LookupTable
 from .common import (cleared_target, add_optional_inputs, bind, box_proxy, box_view, camera_uniforms, check_flag,
                      check_scene, grow_pixels, shading_defines,
                      check_step, check_target, preintegration_applies, preintegration_table, tf_uniforms, volume_uniforms)
@@ -142,7 +142,7 @@ def make_plan(scene, step=None, *, target="rgba32f", jitter_seed=None, ert_trans
               skip_empty=True, preintegrate=False, refine=1, gradients="on_the_fly", step_table=True,
               tables=None):
     """Validate the options and decide what the scene needs. ``tables`` (a
-    ``dvr_gl.cache.TableCache``) keeps the TF's lookup table and the volume's brick
+    ``dvr_gl.util.cache.TableCache``) keeps the TF's lookup table and the volume's brick
     ranges between frames."""
     tables = tables or TableCache()
     check_scene(scene, "raycast")

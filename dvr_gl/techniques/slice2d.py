@@ -55,9 +55,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..cache import TableCache
-from ..scene import Scene
-from ..transfer import LookupTable
+from ..util.cache import TableCache
+from ..model.scene import Scene
+from ..model.transfer import LookupTable
 from .common import (cleared_target, add_optional_inputs, shading_defines, bind, box_depth_range, camera_uniforms, near_plane, check_flag,
                      draw_box_instances,
                      check_scene, check_target, eye_view_projection, preintegration_table, tf_uniforms,

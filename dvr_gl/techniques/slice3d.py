@@ -40,7 +40,7 @@ shells : slice along spherical shells around the eye (radii ``(j + 0.5) * step``
     of planes; every ray then meets the shells ``step`` apart. Drawn as instances of the
     box's back faces (or a full-screen triangle with the eye inside).
 preintegrate : classify whole segments between consecutive slices with the pre-integrated
-    table (``dvr_gl.preintegration``) instead of midpoint samples.
+    table (``dvr_gl.model.preintegration``) instead of midpoint samples.
 gradients : "on_the_fly" (default) | "texture": as for ray casting; with
     ``Scene(shading=True)`` every segment is lit with the gradient at its midpoint, the
     gap pass's pieces too.
@@ -53,9 +53,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..cache import TableCache
-from ..scene import Scene
-from ..transfer import LookupTable
+from ..util.cache import TableCache
+from ..model.scene import Scene
+from ..model.transfer import LookupTable
 from . import proxy as proxy_geometry
 from .common import (cleared_target, add_optional_inputs, shading_defines, bind, camera_uniforms, draw_box_instances, check_flag, check_scene,
                      check_step, check_target, inflated_corners, plane_projection, plane_triangles, preintegration_table,

@@ -130,16 +130,16 @@ from functools import cached_property
 
 import numpy as np
 
-from ..cache import TableCache
+from ..util.cache import TableCache
 from ..reference.common import cell_is_valid, trilinear
-from ..scene import Scene
-from ..transfer import LookupTable
+from ..model.scene import Scene
+from ..model.transfer import LookupTable
 from . import proxy as proxy_geometry
 from .common import (RepeatedIndices, SizedTarget, bind, camera_uniforms, check_flag, check_scene, check_step,
                      check_target,
                      cleared_target, data_projection, plane_projection, plane_triangles, point_shading_defines,
                      sample_term_uniforms, tf_uniforms)
-from ..particles import extinction
+from .particle_sets import extinction
 from .particles import pixels_per_unit
 
 POINT_SPRITES = True  # the Gaussian kernel's splats are GL points, clipped by their centres (see Renderer.render)

@@ -2,7 +2,7 @@
 
 About this technique
 --------------------
-Per view, the cells are put in back-to-front order (``dvr_gl.mesh``: MPVO with the
+Per view, the cells are put in back-to-front order (``dvr_gl.model.mesh``: MPVO with the
 per-pixel treatment of gaps in the domain, or a centroid sort) and drawn in that order,
 each as its four faces with front faces culled. A cell's back faces cover its projected
 silhouette exactly once, like the 3 or 4 triangles of Shirley and Tuchman's
@@ -44,10 +44,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..cache import TableCache
-from ..mesh import LOCAL_FACES, Order, centroid_order, mpvo_order, topology, visible_cells
+from ..util.cache import TableCache
+from ..model.mesh import LOCAL_FACES, Order, centroid_order, mpvo_order, topology, visible_cells
 from ..reference.linear_segment import SegmentKnots
-from ..scene import OPTICAL_MODELS, Scene
+from ..model.scene import OPTICAL_MODELS, Scene
 from .common import (sample_term_uniforms, cleared_target, RepeatedIndices, SizedTarget, bind, camera_uniforms,
                      check_scene, check_target, data_projection, grow_pixels, knot_uniforms)
 

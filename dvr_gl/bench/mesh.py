@@ -16,7 +16,7 @@ Per data set and renderer:
   128), with the same camera.
 
 Per data set also: the time of Shirley and Tuchman's classification of the visible cells
-in NumPy (``dvr_gl.shirley_tuchman``), the CPU alternative to the per-fragment clipping
+in NumPy (``dvr_gl.techniques.shirley_tuchman``), the CPU alternative to the per-fragment clipping
 that ``tetra`` does on the GPU (printed after the table, in the JSON info).
 
 Renderers: dvr_gl ``tetra`` with ``sort="mpvo"`` and with ``sort="centroid"``, and VTK's
@@ -33,10 +33,10 @@ import time
 
 import numpy as np
 
-from . import metrics
-from .bench import DEFAULT_DATA_DIR, _fmt, _machine, error_axes, figure_bytes, renderer_line, write_results
-from .progress import Progress
-from .scene import Scene, TetMesh, TransferFunction, default_camera
+from .. import metrics
+from .raycast import DEFAULT_DATA_DIR, _fmt, _machine, error_axes, figure_bytes, renderer_line, write_results
+from ..util.progress import Progress
+from ..model.scene import Scene, TetMesh, TransferFunction, default_camera
 
 MESHES = {  # name -> (file under the shared data folder, scalar array)
     "bluntfin": (os.path.join("nasa_bluntfin", "bluntfin_tets.npz"), "Density"),
@@ -54,7 +54,7 @@ def load_mesh_dataset(name, data_dir=None):
     if name not in MESHES:
         raise ValueError(f"unknown mesh data set {name!r}; choose from {', '.join(MESHES)}")
     if name == "ball":
-        from .data import delaunay_ball, synthetic_tf
+        from ..data import delaunay_ball, synthetic_tf
         return delaunay_ball(), synthetic_tf()
     path, scalars = MESHES[name]
     directory = data_dir or os.environ.get("DVR_GL_DATA") or DEFAULT_DATA_DIR
@@ -86,7 +86,7 @@ def _camera(mesh, turn=0.0):
 
 def _time_dvr_gl(gl, scene, sort, repeats, on_frame):
     """Median (sort, draw + read-back, total) seconds over frames each from a new view."""
-    from .techniques import tetra
+    from ..techniques import tetra
     sorts, draws, totals = [], [], []
     image = None
     for i in range(-1, repeats):
@@ -108,9 +108,9 @@ def _time_dvr_gl(gl, scene, sort, repeats, on_frame):
 
 def _time_cpu_classification(scene, repeats=3):
     """Median seconds of Shirley-Tuchman's classification of the visible cells in NumPy
-    (``dvr_gl.shirley_tuchman``): the CPU alternative to tetra's per-fragment clipping."""
-    from . import shirley_tuchman
-    from .mesh import topology, visible_cells
+    (``dvr_gl.techniques.shirley_tuchman``): the CPU alternative to tetra's per-fragment clipping."""
+    from ..techniques import shirley_tuchman
+    from ..model.mesh import topology, visible_cells
     mesh = scene.volume
     cells = visible_cells(mesh, scene.tf)
     cells = cells[~topology(mesh).flat[cells]]
@@ -123,7 +123,7 @@ def _time_cpu_classification(scene, repeats=3):
 
 
 def _current(gl):
-    from .gl.context import current
+    from ..gl.context import current
     return current(gl.ctx)
 
 
@@ -131,7 +131,7 @@ def run_mesh(args, err=None):
     """Run the suite; returns (rows, info)."""
     err = err if err is not None else sys.stderr   # looked up now: tests swap sys.stderr
     import dvr_gl
-    from .reference.exact import exact as exact_image
+    from ..reference.exact import exact as exact_image
 
     names = [n.strip() for n in args.datasets.split(",") if n.strip()]
     peer, vtk_note = None, None
@@ -181,7 +181,7 @@ def run_mesh(args, err=None):
                     else:
                         _, _, ts, td, times = _time_dvr_gl(gl, scene, sort, args.repeats, tick)
                         image = gl.render(small, technique="tetra", sort=sort)
-                        from .techniques import tetra
+                        from ..techniques import tetra
                         plan = tetra.make_plan(scene, sort=sort, tables=gl.tables)
                         row = dict(sort_ms=1e3 * ts, draw_ms=1e3 * td, cycles_broken=plan.order.cycles_broken,
                                    gap_constraints=plan.order.gap_constraints, drawn=int(plan.draw.size))

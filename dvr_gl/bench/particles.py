@@ -27,11 +27,11 @@ import time
 
 import numpy as np
 
-from . import metrics
-from .cache import TableCache
-from .bench import CHEST_FILE, _fmt, _machine, error_axes, figure_bytes, renderer_line, turning_frames, write_results
-from .progress import Progress
-from .scene import Scene, default_camera
+from .. import metrics
+from ..util.cache import TableCache
+from .raycast import CHEST_FILE, _fmt, _machine, error_axes, figure_bytes, renderer_line, turning_frames, write_results
+from ..util.progress import Progress
+from ..model.scene import Scene, default_camera
 
 DATASETS = ("head", "chest", "bluntfin")
 MARKERS = (("splat density 1", "v"), ("splat density 2", "^"), ("VTK", "D"))   # the rest: squares
@@ -42,15 +42,15 @@ CSV_FIELDS = ["dataset", "renderer", "repetitions", "width", "particles", "gener
 
 def _scene(name, size, data_dir):
     if name == "head":
-        from .data import ct_head, ct_head_tf
+        from ..data import ct_head, ct_head_tf
         vol = ct_head()
         return Scene(vol, ct_head_tf(), _camera(vol, name), size, size), ("raycast", {"step": 0.5 * vol.min_spacing})
     if name == "chest":
-        from .bench import chest_ct, chest_tf
+        from .raycast import chest_ct, chest_tf
         vol = chest_ct(os.path.join(data_dir, CHEST_FILE) if data_dir else None)
         return Scene(vol, chest_tf(vol), _camera(vol, name), size, size), ("raycast", {"step": 0.5 * vol.min_spacing})
     if name == "bluntfin":
-        from .bench_mesh import load_mesh_dataset
+        from .mesh import load_mesh_dataset
         mesh, tf = load_mesh_dataset("bluntfin", data_dir)
         return Scene(mesh, tf, _camera(mesh, name), size, size), ("tetra", {})
     raise ValueError(f"unknown data set {name!r} for the particles suite; choose from {', '.join(DATASETS)}")
@@ -72,9 +72,9 @@ def run_particles(args, err=None):
     """Run the suite; returns (rows, info)."""
     err = err if err is not None else sys.stderr   # looked up now: tests swap sys.stderr
     import dvr_gl
-    from .gl.context import current
-    from .reference.exact import exact as exact_image
-    from .techniques import particles as technique
+    from ..gl.context import current
+    from ..reference.exact import exact as exact_image
+    from ..techniques import particles as technique
 
     names = [n.strip() for n in args.datasets.split(",") if n.strip()]
     reps = args.repetitions_list
@@ -158,7 +158,7 @@ def _vtk_row(name, scene, small, exact, args, err):
 
 def _draw_seconds(gl, plan, repeats=3):
     """Median seconds to draw one particle set and finish (no read-back)."""
-    from .techniques import particles as technique
+    from ..techniques import particles as technique
     times = []
     for _ in range(repeats + 1):
         t0 = time.perf_counter()

@@ -75,7 +75,7 @@ class LookupTable:
         ``alpha_L = 1 - (1 - alpha)^(L/u)`` (from the float32 entries, in float64). The
         ray caster interpolates it for every full-length segment instead of correcting
         each sample (GLSL ``lookupStepTF``); the difference is ``step_table_error``."""
-        from .reference.common import correct_opacity
+        from ..reference.common import correct_opacity
         a = self.table[:, 3].astype(np.float64)
         corrected = correct_opacity(a, length_over_unit, self.transparency.astype(np.float64))
         out = np.empty((self.size, 4))
@@ -87,7 +87,7 @@ class LookupTable:
         """Largest difference, over values between the entries, between interpolating
         ``step_table`` and correcting the interpolated entry (what a sample gets either
         way, float64): the price of the table, per segment."""
-        from .reference.common import correct_opacity
+        from ..reference.common import correct_opacity
         f = np.linspace(0.0, 1.0, per_interval + 1)[1:-1]
         t = self.table.astype(np.float64)
         w = self.transparency.astype(np.float64)
@@ -357,8 +357,8 @@ def save_tf_json(path, tf: TransferFunction):
     """Write ``tf`` as the JSON :func:`load_tf_json` reads (and ``dvr-gl render --tf
     FILE``), one control point per line. Numbers are written with Python's shortest
     round-tripping ``repr``, so loading the file gives back exactly the same function.
-    The write is atomic (:func:`dvr_gl.io.atomic_write`). Returns ``path``."""
-    from .io import atomic_write
+    The write is atomic (:func:`dvr_gl.formats.atomic_write`). Returns ``path``."""
+    from ..formats import atomic_write
 
     if not isinstance(tf, TransferFunction):
         raise TypeError(f"tf must be a dvr_gl.TransferFunction, got {type(tf).__name__}")

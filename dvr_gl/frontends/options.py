@@ -2,9 +2,9 @@
 (:func:`add_render_options`), their argument types, and the checks and loading that turn
 them into a scene (:func:`technique_options`, :func:`load_input_args`,
 :func:`resolve_tf_option`, ...). Bad input is a :class:`UsageError` naming the option.
-The command line (:mod:`dvr_gl.cli`) and the viewer (:mod:`dvr_gl.viewer`) both build on
+The command line (:mod:`dvr_gl.frontends.cli`) and the viewer (:mod:`dvr_gl.frontends.viewer`) both build on
 this module, so neither reaches into the other; loading and presets themselves live in
-:mod:`dvr_gl.inputs`, which :func:`dvr_gl.render` shares too."""
+:mod:`dvr_gl.frontends.inputs`, which :func:`dvr_gl.render` shares too."""
 
 from __future__ import annotations
 
@@ -12,9 +12,9 @@ import argparse
 import math
 import os
 
-from . import io as dvr_io
+from .. import formats as dvr_io
 from .inputs import PRESETS
-from .scene import MODES
+from ..model.scene import MODES
 
 SORTS = ("mpvo", "centroid")  # dvr_gl.techniques.tetra's orders (imported lazily there)
 
@@ -99,7 +99,7 @@ _background = _arg_type(_background_value, "background")
 
 
 def _illustration(text):
-    from .scene import ILLUSTRATION_TERMS
+    from ..model.scene import ILLUSTRATION_TERMS
     names = [t.strip() for t in text.split(",") if t.strip()]
     unknown = [n for n in names if n not in ILLUSTRATION_TERMS]
     if not names or unknown:
@@ -316,7 +316,7 @@ def _check_input_options(args, mesh):
 # ----------------------------------------------------------------------------- loading
 
 def load_input_args(args):
-    """The volume (or mesh) and the default preset name (dvr_gl.inputs.load_input)."""
+    """The volume (or mesh) and the default preset name (dvr_gl.frontends.inputs.load_input)."""
     from .inputs import load_input
     return load_input(args.input, scalars=getattr(args, "scalars", None), shape=args.shape, dtype=args.dtype,
                       spacing=args.spacing, origin=args.origin, mask_nonfinite=args.mask_nonfinite,
@@ -346,7 +346,7 @@ def check_technique(name):
     if name is None:  # the default for the input's kind: technique_options picks it
         return
     try:
-        from .techniques import names
+        from ..techniques import names
     except ImportError:  # no registry: the renderer will judge
         return
     if name not in names():

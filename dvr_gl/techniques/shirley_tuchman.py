@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .mesh import LOCAL_FACES, topology
+from ..model.mesh import LOCAL_FACES, topology
 
 _CHUNK = 1 << 17       # cells per batch
 _ZERO_AREA = 1e-12     # |A_f| below this times the cell's largest |A_f|: zero

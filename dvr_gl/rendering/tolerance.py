@@ -89,8 +89,8 @@ def samplings(scene):
     """The ways of sampling a tolerance request weighs for ``scene``: plain midpoint
     samples; pre-integrated segments where they apply; and refined ones where the TF has
     detail that the data's values can reach."""
-    from .techniques.common import preintegration_applies
-    from .techniques.raycast import detail_knots
+    from ..techniques.common import preintegration_applies
+    from ..techniques.raycast import detail_knots
     ways = [dict(PLAIN)]
     if preintegration_applies(scene):
         ways.append({"preintegrate": True, "refine": 1})

@@ -28,7 +28,7 @@ import math
 
 import numpy as np
 
-from .scene import TetMesh, TransferFunction
+from ..model.scene import TetMesh, TransferFunction
 
 HISTOGRAM_BINS = 128
 CURVE_SAMPLES = 256

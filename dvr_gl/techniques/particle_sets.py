@@ -162,7 +162,7 @@ def generate(data, tf, radius, seed=0, repetition=0, sampler="rejection"):
 def particle_gradients(particle_set, data):
     """(N, 3) float32: the gradient at each particle, for lighting it. A grid's is the
     contract's gradient at the particle's centre; a mesh's, its cell's (constant)."""
-    from .reference.shading import point_gradients
+    from ..reference.shading import point_gradients
     return point_gradients(data, particle_set.points, particle_set.owners).astype(np.float32)
 
 

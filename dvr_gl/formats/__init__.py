@@ -61,7 +61,7 @@ a ``FileNotFoundError``.
 - ``.vtu``, legacy ``.vtk`` (``DATASET UNSTRUCTURED_GRID``) and every other format meshio
   reads (``.msh``, ``.xdmf``, ``.inp``, ``.mesh``, ``.vol``, ...). Tetrahedra are kept;
   hexahedra, wedges and pyramids are split into tetrahedra conformingly
-  (:mod:`dvr_gl.cell_split`); vertices, lines and surface cells are ignored when the
+  (:mod:`dvr_gl.model.cell_split`); vertices, lines and surface cells are ignored when the
   file has 3-D cells; any other 3-D cell (quadratic, polyhedral) is an error naming it.
 
 The field is a point array chosen by name (``scalars``; default: the first array with
@@ -88,7 +88,7 @@ import zlib
 
 import numpy as np
 
-from .scene import MAX_IMAGE_SIDE, TetMesh, Volume
+from ..model.scene import MAX_IMAGE_SIDE, TetMesh, Volume
 
 __all__ = ["InputError", "MissingFileError", "load_volume", "load_mesh", "is_mesh_file", "point_arrays",
            "save_png", "to_png_array", "parse_size", "parse_triplet", "parse_orientation", "RAW_DTYPES"]
@@ -162,7 +162,7 @@ def parse_triplet(text, name="value", kind=float, positive=False):
 def parse_orientation(codes, name="orientation"):
     """``"ras"`` -> ``"RAS"``: three letters naming where the x, y and z index axes point,
     one each of R/L, A/P and S/I (nibabel's axis codes); errors name ``name``."""
-    from .scene import _orientation
+    from ..model.scene import _orientation
     try:
         return _orientation(codes.strip() if isinstance(codes, str) else codes)
     except ValueError:
@@ -470,7 +470,7 @@ def _direction_codes(vectors, space=_LPS):
 def _modality_code(value):
     """A modality as the Volume holds it ("CT", "MR", ...), or None for an empty, unknown
     or malformed one."""
-    from .scene import _modality
+    from ..model.scene import _modality
     text = str(value or "").strip().upper()
     try:
         return _modality(text) if text else None
@@ -1070,7 +1070,7 @@ def _float_list(text):
 # ----------------------------------------------------------------------------- meshes
 
 #: meshio's extensions that are also common names for raw volumes: a mesh only when the
-#: command line gives no raw geometry (see dvr_gl.cli).
+#: command line gives no raw geometry (see dvr_gl.frontends.cli).
 AMBIGUOUS_MESH_EXTENSIONS = (".dat", ".vol")
 
 _SPLIT_CELLS = ("tetra", "pyramid", "wedge", "hexahedron")
@@ -1208,7 +1208,7 @@ def _read_meshio(path):
         kinds = ", ".join(sorted(set(ignored))) or "none"
         raise InputError("cells", f"{path!r} has no 3-D cells (cell types: {kinds}); a volume mesh needs "
                                   f"{', '.join(_SPLIT_CELLS)}")
-    from .cell_split import split_cells
+    from ..model.cell_split import split_cells
     try:
         tets = split_cells(blocks)
     except (TypeError, ValueError) as e:

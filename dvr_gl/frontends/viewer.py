@@ -7,7 +7,7 @@ A glfw window (OpenGL 3.3 core) whose moderngl context is handed to a
 shader programs as headless rendering, into the renderer's float target at the window's
 framebuffer size. That texture is then drawn to the window with one full-screen triangle,
 composited over a background colour (``C + (1 - A) * B``), and the transfer-function
-editor (:mod:`dvr_gl.viewer_overlay`) is drawn over it. Screenshots are read from the
+editor (:mod:`dvr_gl.frontends.viewer_overlay`) is drawn over it. Screenshots are read from the
 float target, so they never contain the overlay and equal ``dvr-gl render``'s PNG of the
 same camera.
 
@@ -38,7 +38,7 @@ through the cells themselves (:func:`pick_point_mesh`: the ray is intersected wi
 tetrahedron, the piecewise-linear field is sampled inside the mesh only, and the same
 rule as on grids picks the point; empty space falls back to the box centre).
 
-glfw is imported inside functions only, so ``import dvr_gl.viewer`` works without it.
+glfw is imported inside functions only, so ``import dvr_gl.frontends.viewer`` works without it.
 """
 
 from __future__ import annotations
@@ -54,9 +54,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import io as dvr_io
-from .gl.context import current, idle_framebuffer
-from .scene import ILLUSTRATION_TERMS, MODES, OPTICAL_MODELS, Camera, Scene
+from .. import formats as dvr_io
+from ..gl.context import current, idle_framebuffer
+from ..model.scene import ILLUSTRATION_TERMS, MODES, OPTICAL_MODELS, Camera, Scene
 from .viewer_overlay import OverlayDrawer, TFEditor
 
 PROG = "dvr-gl view"
@@ -248,7 +248,7 @@ def pick_point(volume, tf, mode, iso_value, origin, direction, samples=512, valu
 
 
 def _is_mesh(volume):
-    from .scene import TetMesh
+    from ..model.scene import TetMesh
 
     return isinstance(volume, TetMesh)
 
@@ -363,7 +363,7 @@ class TechniqueInfo:
 def _renders_data_of(name, volume):
     """Whether technique ``name`` is for this kind of data (its module's ``DATA``:
     "volume" for grids, "mesh" for TetMesh, or both), whatever else it may refuse."""
-    from .techniques import get_technique
+    from ..techniques import get_technique
 
     try:
         data = getattr(get_technique(name), "DATA", "volume")
@@ -408,7 +408,7 @@ def probe_technique(name, scene, tables):
     takes a ``step``: the module attribute ``TAKES_STEP`` of the technique interface
     settles the latter; a module without it has ``make_plan`` tried with a step and, if
     it refuses, without one."""
-    from .techniques import get_technique
+    from ..techniques import get_technique
 
     try:
         tech = get_technique(name)
@@ -493,7 +493,7 @@ class Viewer:
     double_click_s = 0.35
 
     def __init__(self, settings: Settings):
-        from .techniques import names
+        from ..techniques import names
 
         self.settings = settings
         self.volume = settings.volume
@@ -563,7 +563,7 @@ class Viewer:
         glfw = _import_glfw()
         import moderngl
 
-        from .renderer import Renderer
+        from ..rendering.renderer import Renderer
 
         width, height = settings.size
         old = glfw.ERROR_REPORTING
@@ -747,7 +747,7 @@ class Viewer:
 
     def _validate(self):
         """Raise if the current state cannot be rendered (make_plan on a tiny scene)."""
-        from .techniques import get_technique
+        from ..techniques import get_technique
 
         scene, name, step, options = self.render_arguments(8, 8)
         get_technique(name).make_plan(scene, step, tables=self.renderer.tables, **options)
@@ -1055,7 +1055,7 @@ class Viewer:
         if not self.info.accepts("sort") or self.info.params is None:
             self.say(f"{self.technique} has no sort option (tetra's cell order, for meshes)")
             return False
-        from .techniques import get_technique
+        from ..techniques import get_technique
 
         sorts = tuple(getattr(get_technique(self.technique), "SORTS", ("mpvo", "centroid")))
         now = self.options.get("sort", sorts[0])
@@ -1113,7 +1113,7 @@ class Viewer:
         self.say(f"transfer function {number}: {name}")
 
     def save_tf(self, path=None):
-        from .transfer import save_tf_json
+        from ..model.transfer import save_tf_json
 
         path = path or self.settings.tf_out
         try:
@@ -1125,7 +1125,7 @@ class Viewer:
         return path
 
     def load_tf(self, path=None):
-        from .transfer import load_tf_json
+        from ..model.transfer import load_tf_json
 
         path = path or self.settings.tf_out
         try:
@@ -1426,7 +1426,7 @@ def _no_display_message(detail):
 # ----------------------------------------------------------------------------- the command
 
 def build_parser():
-    """``dvr-gl render``'s options (:func:`dvr_gl.options.add_render_options`) plus the viewer's."""
+    """``dvr-gl render``'s options (:func:`dvr_gl.frontends.options.add_render_options`) plus the viewer's."""
     from .options import add_render_options, whole_number
 
     description = ("Open a volume in an interactive window. Takes every option of dvr-gl render "

@@ -152,7 +152,7 @@ class _KeepCurrentContext:
     _EGL_DRAW, _EGL_READ = 0x3059, 0x305A
 
     def __init__(self):
-        from .gl.context import egl_library
+        from ..gl.context import egl_library
         self._egl = egl_library()
         self._saved = None
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .scene import TransferFunction, Volume
+from ..model.scene import TransferFunction, Volume
 
 
 def marschner_lobb(n=41, f_m=6.0, alpha=0.25):

@@ -11,9 +11,9 @@ import time
 
 import numpy as np
 
-from . import data, metrics, reference
-from .scene import Camera, Scene, default_camera
-from .techniques import for_scene, get_technique
+from .. import data, metrics, reference
+from ..model.scene import Camera, Scene, default_camera
+from ..techniques import for_scene, get_technique
 
 TILE = 192  # pixels; small enough that the exact images take seconds, not minutes
 #: options a technique gets in the demo beyond its defaults (particles: averaged sets)
@@ -57,8 +57,8 @@ def _time_frames(renderer, scene, technique, repeats=5, **options):
 
 
 def run_demo(out_dir="dvr-gl-demo", preintegrate=False) -> int:
-    from .io import save_png
-    from .renderer import Renderer
+    from ..formats import save_png
+    from ..rendering.renderer import Renderer
 
     os.makedirs(out_dir, exist_ok=True)
     rows, tiles = [], []

@@ -33,10 +33,10 @@ import sys
 
 import numpy as np
 
-from . import metrics
-from .bench import _fmt, _load_datasets, _machine, interleaved_frames, renderer_line, write_results
-from .progress import Progress
-from .scene import Scene
+from .. import metrics
+from .raycast import _fmt, _load_datasets, _machine, interleaved_frames, renderer_line, write_results
+from ..util.progress import Progress
+from ..model.scene import Scene
 
 ALL_TERMS = ("boundary", "silhouette", "tone", "depth_cue")
 # a variant: (lit, illustration terms, classified by the 2D TF gradient_modulated makes)
@@ -78,8 +78,8 @@ def variant(scene, lit_terms):
 def modulated_tf(volume, tf):
     """The data set's TF with Levoy's gradient-magnitude opacity modulation, as a 2D TF
     over the volume's gradient magnitudes (made once per volume and TF)."""
-    from .reference.shading import gradient_max
-    from .transfer2d import gradient_modulated
+    from ..reference.shading import gradient_max
+    from ..model.transfer2d import gradient_modulated
     return gradient_modulated(tf, (0.0, gradient_max(volume)))
 
 
@@ -127,10 +127,10 @@ def _timed_rows(gl, peers, name, scene, step_vox, repeats, progress, exact_image
 def convergence(gl, size):
     """Lit Marschner-Lobb: RMSE against exact per step for raycast and slice3d, the
     order per halving, and the float64 marcher at 1/4 voxel."""
-    from .phantoms import marschner_lobb, marschner_lobb_tf
-    from .reference import render as reference_render
-    from .reference.exact import exact as exact_image
-    from .scene import default_camera
+    from ..data.phantoms import marschner_lobb, marschner_lobb_tf
+    from ..reference import render as reference_render
+    from ..reference.exact import exact as exact_image
+    from ..model.scene import default_camera
     volume = marschner_lobb(41)
     scene = Scene(volume, marschner_lobb_tf(), default_camera(volume, azimuth=30, elevation=20),
                   width=size, height=size, shading=True)
@@ -151,7 +151,7 @@ def convergence(gl, size):
 def run_shading(args, err=None):
     err = err if err is not None else sys.stderr
     import dvr_gl
-    from .reference.exact import exact as exact_image
+    from ..reference.exact import exact as exact_image
     names = [n.strip() for n in args.datasets.split(",") if n.strip()]
     steps = [float(s) for s in args.steps.split(",") if s.strip()]
     peers = {}
@@ -225,7 +225,7 @@ def figure_png(rows, info) -> bytes:
     matplotlib.use("Agg", force=False)
     from matplotlib import colormaps
     from matplotlib.figure import Figure
-    from .bench import error_axes, figure_bytes
+    from .raycast import error_axes, figure_bytes
 
     names = list(dict.fromkeys(r["dataset"] for r in rows))
     labels = list(dict.fromkeys(r["renderer"] for r in rows))

@@ -133,7 +133,7 @@ def from_widgets(widgets, value_range, gradient_range, resolution=RESOLUTION, un
         raise ValueError("widgets must hold at least one Rectangle or Triangle, got none")
     for w in widgets:
         if not isinstance(w, (Rectangle, Triangle)):
-            raise TypeError(f"widgets must be dvr_gl.transfer2d.Rectangle or Triangle, got {type(w).__name__}")
+            raise TypeError(f"widgets must be dvr_gl.model.transfer2d.Rectangle or Triangle, got {type(w).__name__}")
     S, G = _grid(value_range, gradient_range, resolution)
     clear = np.ones(S.shape)
     weighted = np.zeros(S.shape + (3,))

@@ -38,10 +38,10 @@ from pathlib import Path
 
 import numpy as np
 
-from . import metrics
-from .bench import _machine, _vtk_version, error_axes, figure_bytes, renderer_line, turning_frames
-from .io import atomic_write
-from .progress import Progress
+from .. import metrics
+from .raycast import _machine, _vtk_version, error_axes, figure_bytes, renderer_line, turning_frames
+from ..formats import atomic_write
+from ..util.progress import Progress
 
 CSV_FIELDS = ("scene", "kind", "technique", "parameter", "value", "width", "height", "ms_median", "ms_min",
               "first_ms", "rmse", "max_abs", "psnr", "gpu_mb", "error_size")
@@ -90,10 +90,10 @@ def render_options(technique, parameter, value, options, data):
 def scenes(names, size, data_dir=None):
     """[(name, kind, scene, turn)] of the requested names (missing files are skipped);
     ``turn(i)`` is the camera of timed frame i, half a degree further round each time."""
-    from .bench import oblique_camera
-    from .data import ct_head, ct_head_tf, delaunay_ball, synthetic_tf
-    from .phantoms import marschner_lobb, marschner_lobb_tf
-    from .scene import Scene, default_camera
+    from .raycast import oblique_camera
+    from ..data import ct_head, ct_head_tf, delaunay_ball, synthetic_tf
+    from ..data.phantoms import marschner_lobb, marschner_lobb_tf
+    from ..model.scene import Scene, default_camera
     out = []
 
     def add(label, kind, data, tf, camera_at):
@@ -114,7 +114,7 @@ def scenes(names, size, data_dir=None):
             add("Delaunay ball", "mesh", mesh, synthetic_tf(),
                 lambda az, m=mesh: default_camera(m, azimuth=az, elevation=20))
         elif name == "bluntfin":
-            from .bench_mesh import load_mesh_dataset
+            from .mesh import load_mesh_dataset
             try:
                 mesh, tf = load_mesh_dataset("bluntfin", data_dir)
             except FileNotFoundError as e:
@@ -132,7 +132,7 @@ def run_all(args, err=None):
     exact) at the error size, for the contact sheet."""
     err = err if err is not None else sys.stderr
     import dvr_gl
-    from .reference.exact import exact as exact_image
+    from ..reference.exact import exact as exact_image
     from . import vtk_peer
 
     names = [n.strip() for n in args.datasets.split(",") if n.strip()]

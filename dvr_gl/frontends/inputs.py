@@ -2,9 +2,9 @@
 array) into scene data, and a transfer-function name into a transfer function; and
 ``dvr_gl.render``, the one-line way to a picture.
 
-The command line (``dvr_gl.cli``), the viewer and :func:`render` use these, so that a
+The command line (``dvr_gl.frontends.cli``), the viewer and :func:`render` use these, so that a
 file, a preset or an error reads the same everywhere. Errors are
-:class:`dvr_gl.io.InputError` with the field that was wrong (``path``, ``shape``,
+:class:`dvr_gl.formats.InputError` with the field that was wrong (``path``, ``shape``,
 ``dtype``, ``tf``, ...); the command line names its own option for each field.
 """
 
@@ -14,17 +14,17 @@ import os
 
 import numpy as np
 
-from . import io as dvr_io
-from .io import InputError
+from .. import formats as dvr_io
+from ..formats import InputError
 
 
 def _transfer():
-    from . import transfer
+    from ..model import transfer
     return transfer
 
 
 def _data():
-    from . import data
+    from .. import data
     return data
 
 
@@ -77,7 +77,7 @@ def suitable_presets(data):
 
 def is_mesh_input(source, shape=None, dtype=None):
     """Whether the named ``source`` is a mesh (rendered by cell projection) rather than a
-    grid volume: a mesh file (``dvr_gl.io.is_mesh_file``), unless raw geometry (``shape``,
+    grid volume: a mesh file (``dvr_gl.formats.is_mesh_file``), unless raw geometry (``shape``,
     ``dtype``) makes it a volume whatever its extension."""
     if not isinstance(source, (str, os.PathLike)):
         return False
@@ -90,12 +90,12 @@ def is_mesh_input(source, shape=None, dtype=None):
 def load_input(source, *, scalars=None, shape=None, dtype=None, spacing=None, origin=None, mask_nonfinite=False,
                orientation=None):
     """(data, default preset name) for ``source``: a file (a volume, or a mesh as
-    ``dvr_gl.io.is_mesh_file`` tells), ``"builtin:NAME"`` (a bundled data set), a 3-D
+    ``dvr_gl.formats.is_mesh_file`` tells), ``"builtin:NAME"`` (a bundled data set), a 3-D
     array (nz, ny, nx), or a ``Volume`` / ``TetMesh`` (returned as it is). ``spacing``
     and ``origin`` apply to arrays and bundled data too; ``shape`` and ``dtype`` are for
     raw files. ``orientation`` (three letters such as ``"RAS"``: where the x, y and z
     axes point anatomically) replaces or supplies a volume's; a mesh takes none."""
-    from .scene import TetMesh, Volume
+    from ..model.scene import TetMesh, Volume
     if orientation is not None:
         orientation = dvr_io.parse_orientation(orientation)
         if isinstance(source, TetMesh) or is_mesh_input(source, shape, dtype):
@@ -151,11 +151,11 @@ def _is_tf2d_file(path):
 
 def resolve_tf(spec, data, default="auto"):
     """(name, transfer function) for ``spec``: None (the ``default`` preset), a preset
-    name, a JSON file (``dvr_gl.transfer.load_tf_json``; with "widgets" or "table", a 2D
-    one, ``dvr_gl.transfer2d.load_tf2d_json``, whose ranges default to the data's values
+    name, a JSON file (``dvr_gl.model.transfer.load_tf_json``; with "widgets" or "table", a 2D
+    one, ``dvr_gl.model.transfer2d.load_tf2d_json``, whose ranges default to the data's values
     and gradient magnitudes) or a TransferFunction (1D or 2D)."""
-    from .scene import TransferFunction, TransferFunction2D
-    from .transfer import load_tf_json
+    from ..model.scene import TransferFunction, TransferFunction2D
+    from ..model.transfer import load_tf_json
     if isinstance(spec, (TransferFunction, TransferFunction2D)):
         return "given", spec
     if spec is None:
@@ -175,8 +175,8 @@ def resolve_tf(spec, data, default="auto"):
     if os.path.isfile(spec):
         try:
             if _is_tf2d_file(spec):
-                from .reference.shading import gradient_max
-                from .transfer2d import load_tf2d_json
+                from ..reference.shading import gradient_max
+                from ..model.transfer2d import load_tf2d_json
                 return spec, load_tf2d_json(spec, data.data_range, (0.0, gradient_max(data)))
             return spec, load_tf_json(spec)
         except (ValueError, TypeError) as e:
@@ -199,7 +199,7 @@ def first_camera(data, azimuth=None, elevation=None, zoom=1.0, fov=30.0, ortho=F
     (for a volume with an anatomical orientation, the eye in front of the face with the
     head up; otherwise looking along -z with +y up), turned by ``azimuth`` and
     ``elevation``, which default to an oblique FIRST_AZIMUTH, FIRST_ELEVATION."""
-    from .scene import anatomical_frame, default_camera
+    from ..model.scene import anatomical_frame, default_camera
     frame = anatomical_frame(data)
     azimuth = FIRST_AZIMUTH if azimuth is None else azimuth
     elevation = FIRST_ELEVATION if elevation is None else elevation
@@ -223,7 +223,7 @@ def shading_for(technique, mode="composite", optical_model="emission_absorption"
 def parse_light(text):
     """A light from text: ``headlight``, ``world:X,Y,Z`` or ``view:X,Y,Z`` (the direction
     towards the light), each optionally followed by ``:INTENSITY``."""
-    from .scene import Light
+    from ..model.scene import Light
     parts = str(text).strip().split(":")
     space = parts[0].strip().lower()
     try:
@@ -245,7 +245,7 @@ def render(source, *, tf=None, technique=None, size=(512, 512), azimuth=None, el
            orientation=None, backend="auto", **options):
     """Render ``source`` (anything :func:`load_input` takes) in one call; returns the
     (height, width, 4) float32 premultiplied RGBA image, row 0 on top, as a
-    :class:`dvr_gl.notebook.RenderedImage` (an ndarray that Jupyter shows as a picture).
+    :class:`dvr_gl.frontends.notebook.RenderedImage` (an ndarray that Jupyter shows as a picture).
 
     >>> image = dvr_gl.render("ct.nrrd", azimuth=30, elevation=20)          # doctest: +SKIP
     >>> image = dvr_gl.render(np.random.rand(32, 32, 32), tf="auto")          # doctest: +SKIP
@@ -259,8 +259,8 @@ def render(source, *, tf=None, technique=None, size=(512, 512), azimuth=None, el
     technique lights them (:func:`shading_for`) unless ``shading=False``; ``lights``: a
     ``dvr_gl.Light`` or a list of them (the headlight by default). One renderer per
     backend is kept for the process, so later calls do not compile or upload again."""
-    from .renderer import Renderer
-    from .scene import Scene
+    from ..rendering.renderer import Renderer
+    from ..model.scene import Scene
     data, preset = load_input(source, scalars=scalars, spacing=spacing, orientation=orientation)
     _, tf = resolve_tf(tf, data, preset)
     try:

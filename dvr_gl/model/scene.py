@@ -130,7 +130,7 @@ class Volume:
         the file's metadata; presets use it (an 8-bit "CT" gets the windowed CT preset).
     orientation_assumed : True where ``orientation`` is the file format's convention
         rather than the file's statement (a MetaImage without orientation fields is in
-        ITK's LPS frame; see ``dvr_gl.io``): the first view uses it, presets do not take
+        ITK's LPS frame; see ``dvr_gl.formats``): the first view uses it, presets do not take
         the volume for a scan because of it.
     """
 
@@ -256,7 +256,7 @@ class TetMesh:
     is the union of the tetrahedra and need not be convex. Tetrahedra of zero volume are
     kept (they contribute nothing). Arrays are copied and stored read-only; the
     connectivity and plane equations renderers need are derived once, on first use
-    (``dvr_gl.mesh.topology``).
+    (``dvr_gl.model.mesh.topology``).
     """
 
     def __init__(self, points, tets, scalars):
@@ -437,7 +437,7 @@ class TransferFunction2D:
     evenly over the two ranges. The function is the table's bilinear interpolant, clamped
     to its edges outside the ranges; opacity, as in ``TransferFunction``, is that of a slab
     ``unit_distance`` thick. The gradient magnitude is the contract's |grad f| (data units
-    per world unit). ``dvr_gl.transfer2d`` builds tables from widgets (rectangles and
+    per world unit). ``dvr_gl.model.transfer2d`` builds tables from widgets (rectangles and
     triangles) and from Levoy's (1988) iso-contour and region-boundary opacities.
 
     A scene given one classifies every composite sample with it; ``envelope`` is the 1D

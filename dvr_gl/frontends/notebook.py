@@ -22,7 +22,7 @@ import time
 import numpy as np
 
 from . import inputs
-from . import io as dvr_io
+from .. import formats as dvr_io
 
 #: the background a displayed image is composited over (white, as ``dvr-gl render``)
 DEFAULT_BACKGROUND = (1.0, 1.0, 1.0)
@@ -30,7 +30,7 @@ DEFAULT_BACKGROUND = (1.0, 1.0, 1.0)
 
 def png_bytes(image, background=DEFAULT_BACKGROUND, compress_level=1):
     """PNG-encoded bytes of ``image`` ((H, W, 4) float premultiplied RGBA) composited over
-    ``background`` (None: un-premultiplied RGBA), as :func:`dvr_gl.io.save_png` writes it.
+    ``background`` (None: un-premultiplied RGBA), as :func:`dvr_gl.formats.save_png` writes it.
     A low zlib level: the widget sends a frame per drag step."""
     from PIL import Image
     buffer = _io.BytesIO()
@@ -205,7 +205,7 @@ if anywidget is not None:
     class VolumeWidget(anywidget.AnyWidget):
         """An interactive view of a volume or mesh in a notebook.
 
-        >>> from dvr_gl.notebook import VolumeWidget                # doctest: +SKIP
+        >>> from dvr_gl.frontends.notebook import VolumeWidget                # doctest: +SKIP
         >>> VolumeWidget("head.nii.gz")                              # doctest: +SKIP
 
         ``source``: anything :func:`dvr_gl.render` takes (a file, ``builtin:NAME``, an
@@ -236,7 +236,7 @@ if anywidget is not None:
                      zoom=1.0, background=DEFAULT_BACKGROUND, **options):
             data, default_preset = inputs.load_input(source)
             width, height = _size_pair(size)
-            from .techniques import for_data
+            from ..techniques import for_data
             names = list(for_data(data))
             if technique is None:
                 technique = names[0]
@@ -306,7 +306,7 @@ else:
         """Needs anywidget: ``pip install "dvr-gl[notebook]"``."""
 
         def __init__(self, *args, **kwargs):
-            raise ImportError('dvr_gl.notebook.VolumeWidget needs anywidget: pip install "dvr-gl[notebook]"')
+            raise ImportError('dvr_gl.frontends.notebook.VolumeWidget needs anywidget: pip install "dvr-gl[notebook]"')
 
 
 def _degrees(value):

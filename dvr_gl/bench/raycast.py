@@ -5,7 +5,7 @@ For each data set (the vtk.js LIDC2 chest CT and the bundled CT head) and each s
 
 - dvr_gl's ray caster without empty-space skipping,
 - dvr_gl's ray caster with empty-space skipping,
-- VTK's GPU ray caster (``dvr_gl.vtk_peer``; skipped when VTK is not installed),
+- VTK's GPU ray caster (``dvr_gl.bench.vtk_peer``; skipped when VTK is not installed),
 
 and reports the median steady-state frame time (after one warm-up frame; every frame
 ends with the image read back, so the GL has finished; the renderers' frames are taken
@@ -40,10 +40,10 @@ from pathlib import Path
 
 import numpy as np
 
-from . import metrics
-from .io import atomic_write
-from .progress import Progress
-from .scene import Camera, Scene, TransferFunction, Volume
+from .. import metrics
+from ..formats import atomic_write
+from ..util.progress import Progress
+from ..model.scene import Camera, Scene, TransferFunction, Volume
 
 STEPS_VOXELS = (1.0, 0.5, 0.25)
 # the project's shared data folder beside the checkout (override with $DVR_GL_DATA)
@@ -109,7 +109,7 @@ def chest_tf(volume) -> TransferFunction:
 
 
 def _head():
-    from .data import ct_head, ct_head_tf
+    from ..data import ct_head, ct_head_tf
     return ct_head(), ct_head_tf()
 
 
@@ -216,7 +216,7 @@ def run(args, err=None):
     import dvr_gl
     # The function, imported from its module: ``dvr_gl.reference.exact`` the attribute
     # can be shadowed by the submodule of the same name once that has been imported.
-    from .reference.exact import exact as exact_image
+    from ..reference.exact import exact as exact_image
 
     size = args.size
     names = [n.strip() for n in (args.datasets or "chest,head").split(",") if n.strip()]
@@ -323,8 +323,8 @@ def run_slicing(args, err=None):
     post-classified ray caster at the same distance)."""
     err = err if err is not None else sys.stderr   # looked up now: tests swap sys.stderr
     import dvr_gl
-    from .reference.exact import exact as exact_image
-    from .techniques.slice2d import stack_axis
+    from ..reference.exact import exact as exact_image
+    from ..techniques.slice2d import stack_axis
 
     size = args.size
     names = [n.strip() for n in (args.datasets or "chest,head").split(",") if n.strip()]
@@ -427,7 +427,7 @@ def texture_format_throughput(renderer, size=256, samples=64, repeats=5):
     """Trilinear samples per second from a 3-D texture stored as float32, float16 and
     unorm8: every pixel of a size x size target sums ``samples`` lookups along a line."""
     import time
-    from .gl.context import current
+    from ..gl.context import current
     ctx = renderer.ctx
     vs = "#version 330 core\nin vec2 a_pos; void main() { gl_Position = vec4(a_pos, 0.0, 1.0); }"
     fs = f"""#version 330 core
@@ -670,10 +670,10 @@ def run_bench(args) -> int:
         args.datasets = {"mesh": "bluntfin,combustor,loxpost,ball", "particles": "head,bluntfin",
                          "all": "ml,ball" if args.quick else "ml,head,ball,bluntfin"}.get(args.suite, "chest,head")
     if args.suite == "all":
-        from .bench_all import run_all_bench
+        from .all import run_all_bench
         return run_all_bench(args)
     if args.suite == "particles":
-        from .bench_particles import parse_repetitions, run_particles_bench
+        from .particles import parse_repetitions, run_particles_bench
         if args.error_size is None:
             args.error_size = 32 if args.quick else 128
         try:
@@ -683,14 +683,14 @@ def run_bench(args) -> int:
             return 2
         return run_particles_bench(args)
     if args.suite == "shading":
-        from .bench_shading import run_shading_bench
+        from .shading import run_shading_bench
         if args.error_size is None:
             args.error_size = 32 if args.quick else 128
         if args.steps == ",".join(f"{s:g}" for s in STEPS_VOXELS):
             args.steps = "1,0.5"
         return run_shading_bench(args)
     if args.suite == "mesh":
-        from .bench_mesh import run_mesh_bench
+        from .mesh import run_mesh_bench
         if args.error_size is None:
             args.error_size = 32 if args.quick else 128
         return run_mesh_bench(args)

@@ -4,8 +4,8 @@ Exit codes: 0 success; 1 the work failed (no GL backend, a failed frame); 2 bad 
 (a message on stderr names the option and the value; no traceback, no output file);
 130 interrupted. Set ``DVR_GL_DEBUG=1`` to get tracebacks instead of one-line messages.
 
-``render`` takes a volume file (see :func:`dvr_gl.io.load_volume`), a tetrahedral (or
-hexahedral, ...) mesh file (see :func:`dvr_gl.io.load_mesh`; rendered by ``tetra``) or a
+``render`` takes a volume file (see :func:`dvr_gl.formats.load_volume`), a tetrahedral (or
+hexahedral, ...) mesh file (see :func:`dvr_gl.formats.load_mesh`; rendered by ``tetra``) or a
 bundled data set, ``builtin:ct_head`` or ``builtin:synthetic``, e.g.::
 
     dvr-gl render builtin:ct_head --elevation 90 --size 512x512 --out head.png
@@ -24,7 +24,7 @@ import platform
 import sys
 import time
 
-from . import io as dvr_io
+from .. import formats as dvr_io
 from .inputs import PRESETS  # presets and bundled data sets are shared with the viewer and dvr_gl.render
 from .options import (MESH_TECHNIQUES, OPTION_OF_FIELD, UsageError, _check_input_options, _origin, _shape,
                       _spacing, add_orientation_option, add_render_options, check_png, check_technique,
@@ -35,8 +35,8 @@ PROG = "dvr-gl"
 # ----------------------------------------------------------------------------- the parser
 
 def build_parser(bench_module=None):
-    """The argument parser; ``bench_module`` (dvr_gl.bench, if loaded) adds its options."""
-    from . import __version__
+    """The argument parser; ``bench_module`` (dvr_gl.bench.raycast, if loaded) adds its options."""
+    from .. import __version__
 
     parser = argparse.ArgumentParser(
         prog=PROG, description="Direct volume rendering with OpenGL, headless (EGL or OSMesa).")
@@ -95,7 +95,7 @@ def cmd_info(args, out=None):
     if getattr(args, "file", None) is not None:
         return cmd_info_file(args, out)
     import numpy
-    from . import __version__
+    from .. import __version__
     try:
         import moderngl
         mgl = getattr(moderngl, "__version__", "?")
@@ -104,7 +104,7 @@ def cmd_info(args, out=None):
     print(f"dvr_gl {__version__}; python {platform.python_version()}, numpy {numpy.__version__}, "
           f"moderngl {mgl}", file=out)
     try:
-        from .gl import context
+        from ..gl import context
     except ImportError as e:
         print(f"GL context support is not available: {e}", file=out)
         return 1
@@ -192,7 +192,7 @@ def cmd_info_file(args, out=None):
     values = data.scalars if mesh else data.data
     print("histogram  " + text_histogram(values) + f"  ({data.data_range[0]:g} to {data.data_range[1]:g}, "
           "32 bins, height ~ log count)", file=out)
-    from .transfer import auto_preset_name
+    from ..model.transfer import auto_preset_name
     name = preset if preset != "auto" else f"auto: {auto_preset_name(data)}"
     print(f"preset     {_describe_tf(name, PRESETS[preset](data))} (what render uses without --tf)", file=out)
     return 0
@@ -217,7 +217,7 @@ def text_histogram(values, bins=32):
 
 def zero_volume_count(mesh):
     """How many tetrahedra are flat (|6 V| at most 1e-12 times the cube of the longest
-    edge, the test ``dvr_gl.mesh`` applies): they are kept but draw nothing."""
+    edge, the test ``dvr_gl.model.mesh`` applies): they are kept but draw nothing."""
     p = mesh.points[mesh.tets]
     edges = p[:, [1, 2, 3, 2, 3, 3]] - p[:, [0, 0, 0, 1, 1, 2]]
     longest = (edges ** 2).sum(-1).max(axis=1) ** 0.5
@@ -242,8 +242,8 @@ def _describe_tf(name, tf):
 def cmd_render(args, out=None):
     out = out or sys.stdout
     from .inputs import FIRST_AZIMUTH, FIRST_ELEVATION, first_camera, shading_for
-    from .scene import Scene, TransferFunction2D
-    from .techniques.common import SHADING_TECHNIQUES
+    from ..model.scene import Scene, TransferFunction2D
+    from ..techniques.common import SHADING_TECHNIQUES
 
     check_png(args.out)
     check_technique(args.technique)
@@ -355,7 +355,7 @@ def cmd_render(args, out=None):
         print(f"volume     {args.input}: {nx}x{ny}x{nz} (x, y, z) {volume.data.dtype}, spacing {sx:g},{sy:g},{sz:g}, "
               f"values {lo:g}..{hi:g}", file=out)
     if tf_name == "auto":
-        from .transfer import auto_preset_name
+        from ..model.transfer import auto_preset_name
         tf_name = f"auto: {auto_preset_name(volume)}"
     print(f"transfer   {_describe_tf(tf_name, tf)}", file=out)
     print(f"rendered   {args.technique}, mode {mode}" + (f" {args.iso:g}" if mode == "isosurface" else "")
@@ -377,9 +377,9 @@ def _backend_name(renderer, requested):
 
 def cmd_demo(args):
     try:
-        demo = importlib.import_module("dvr_gl.demo")
+        demo = importlib.import_module("dvr_gl.frontends.demo")
     except ModuleNotFoundError as e:
-        if e.name != "dvr_gl.demo":
+        if e.name != "dvr_gl.frontends.demo":
             raise
         print(f"{PROG} demo: the demo is not available yet", file=sys.stderr)
         return 2
@@ -398,9 +398,9 @@ def cmd_bench(args, bench_module):
 
 def cmd_view(args):
     try:
-        viewer = importlib.import_module("dvr_gl.viewer")
+        viewer = importlib.import_module("dvr_gl.frontends.viewer")
     except ModuleNotFoundError as e:
-        if e.name == "dvr_gl.viewer":
+        if e.name == "dvr_gl.frontends.viewer":
             print(f"{PROG} view: the interactive viewer is not available yet", file=sys.stderr)
             return 2
         if e.name == "glfw" or (e.name or "").startswith("glfw."):
@@ -411,14 +411,14 @@ def cmd_view(args):
 
 
 def _load_bench(argv):
-    """dvr_gl.bench when the command is ``bench`` (its options join the parser), else None."""
+    """dvr_gl.bench.raycast when the command is ``bench`` (its options join the parser), else None."""
     command = next((a for a in argv if not a.startswith("-")), None)
     if command != "bench":
         return None
     try:
-        return importlib.import_module("dvr_gl.bench")
+        return importlib.import_module("dvr_gl.bench.raycast")
     except ModuleNotFoundError as e:
-        if e.name != "dvr_gl.bench":
+        if e.name != "dvr_gl.bench.raycast":
             raise
         return None
 

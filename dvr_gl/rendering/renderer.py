@@ -9,11 +9,11 @@ import math
 
 import numpy as np
 
-from .gl.context import context_lost, current, describe, idle_framebuffer, shared_context
-from .gl.programs import ProgramCache
-from .progress import Progress
-from .cache import LRU, IdentityKey as _Key, TableCache
-from .techniques import check_options, get_technique
+from ..gl.context import context_lost, current, describe, idle_framebuffer, shared_context
+from ..gl.programs import ProgramCache
+from ..util.progress import Progress
+from ..util.cache import LRU, IdentityKey as _Key, TableCache
+from ..techniques import check_options, get_technique
 
 
 class Renderer:
@@ -147,7 +147,7 @@ class Renderer:
         same camera, into one array: the same pixels as a single render would give.
 
         ``tolerance`` (ray casting): an RMSE against the exact image; the step is chosen
-        for it (``dvr_gl.tolerance``), and what was chosen is ``last_choice``."""
+        for it (``dvr_gl.rendering.tolerance``), and what was chosen is ``last_choice``."""
         if tolerance is not None:
             if step is not None:
                 raise ValueError(f"give tolerance or step, not both (got step={step!r}, tolerance={tolerance!r})")
@@ -186,7 +186,7 @@ class Renderer:
 
     def tolerance_settings(self, scene, tolerance, technique="raycast", **options):
         """(step, options) for an RMSE of ``tolerance`` against the exact image
-        (``dvr_gl.tolerance``; also ``last_choice``): the error model of the scene's
+        (``dvr_gl.rendering.tolerance``; also ``last_choice``): the error model of the scene's
         pilot view is measured once per way of sampling and kept, and so is the choice
         among them."""
         from . import tolerance as tol
@@ -373,7 +373,7 @@ class Renderer:
         return np.frombuffer(data, np.float32).reshape(height, width, 4)[::-1].copy()
 
     def proxy_vao(self, prog, kind):
-        from .techniques.raycast import PROXY_MESHES
+        from ..techniques.raycast import PROXY_MESHES
         vbo = self._vbos.get(kind)
         if vbo is None:
             vbo = self._vbos[kind] = self.ctx.buffer(PROXY_MESHES[kind]().tobytes())
