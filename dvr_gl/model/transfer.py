@@ -357,8 +357,8 @@ def save_tf_json(path, tf: TransferFunction):
     """Write ``tf`` as the JSON :func:`load_tf_json` reads (and ``dvr-gl render --tf
     FILE``), one control point per line. Numbers are written with Python's shortest
     round-tripping ``repr``, so loading the file gives back exactly the same function.
-    The write is atomic (:func:`dvr_gl.formats.atomic_write`). Returns ``path``."""
-    from ..formats import atomic_write
+    The write is atomic (:func:`dvr_gl.util.files.atomic_write`). Returns ``path``."""
+    from ..util.files import atomic_write
 
     if not isinstance(tf, TransferFunction):
         raise TypeError(f"tf must be a dvr_gl.TransferFunction, got {type(tf).__name__}")

@@ -1015,7 +1015,7 @@ def exact(scene, cache=True, cache_dir=None) -> np.ndarray:
     with np.errstate(divide="ignore", invalid="ignore", over="ignore", under="ignore"):
         img = _render(scene)
     if path is not None:
-        from ..formats import atomic_write
+        from ..util.files import atomic_write
         os.makedirs(directory, exist_ok=True)
         buffer = io.BytesIO()
         np.save(buffer, img)
