@@ -1,9 +1,9 @@
 """dvr_gl: direct volume rendering with OpenGL, headless on llvmpipe or on a GPU,
 checked against NumPy references and an exact float64 integrator."""
 
-from .model.scene import Camera, Light, Scene, TetMesh, TransferFunction, TransferFunction2D, Volume, default_camera
+from .model import Camera, Light, Scene, TetMesh, TransferFunction, TransferFunction2D, Volume, default_camera
 
-__version__ = "0.1.0"
+from ._version import __version__
 
 from . import _compat
 

@@ -8,7 +8,8 @@ import pytest
 from scipy.integrate import quad
 
 from dvr_gl import Camera, Scene, TransferFunction, Volume
-from dvr_gl.reference.common import cell_is_valid, ray_box, trilinear
+from dvr_gl.model.field import cell_is_valid, trilinear
+from dvr_gl.reference.common import ray_box
 
 # import the module itself (the package also exports a function named ``exact``)
 ex = importlib.import_module("dvr_gl.reference.exact")

@@ -13,7 +13,7 @@ import pytest
 import dvr_gl
 from dvr_gl import metrics, reference
 from dvr_gl.reference.common import box_rays
-from dvr_gl.reference.shading import depth_range
+from dvr_gl.model.field import depth_range
 from dvr_gl.model.scene import ILLUSTRATION_TERMS
 from dvr_gl.techniques import get_technique
 
@@ -63,7 +63,7 @@ def terms_tolerance(plan, unlit, g_floor):
     relative = 0.0
     if "boundary" in terms:
         kc, kg, ke = terms["boundary"]
-        g_max = float(np.linalg.norm(dvr_gl.reference.shading.sample_gradients(
+        g_max = float(np.linalg.norm(dvr_gl.model.field.sample_gradients(
             scene.volume, scene.volume.values(np.float64)), axis=-1).max())
         relative += kg * ke * dg / g_max / kc
     if "silhouette" in terms:
@@ -268,7 +268,7 @@ def cued_box_closed_form(scene, colour, tau):
     """A constant block with a depth cue: along a chord [t0, t1] the cue q(t) = a + b t is
     linear (depth is), so C = c tau integral of q(t) e^(-tau (t - t0)) dt in closed form."""
     from dvr_gl.reference.common import box_rays
-    from dvr_gl.reference.shading import depth_range
+    from dvr_gl.model.field import depth_range
     o, d, t0, t1 = box_rays(scene)
     cam = scene.camera
     lo, _ = scene.volume.bounds

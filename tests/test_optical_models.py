@@ -185,7 +185,7 @@ def test_exact_sabella_of_a_constant_box_is_the_closed_form(camera):
     """Every point ties for the peak, so the peak is where the ray enters: its depth
     gives the saturation; the intensity is 1 - e^(-tau L)."""
     from dvr_gl.reference.common import sabella_color
-    from dvr_gl.reference.shading import depth_range
+    from dvr_gl.model.field import depth_range
     volume = constant_box()
     scene = dvr_gl.Scene(volume, BOX_TF, box_cameras(volume)[camera], width=W, height=H, optical_model="sabella")
     o, d, t0, t1 = box_rays(scene)

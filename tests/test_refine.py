@@ -6,7 +6,8 @@ import pytest
 
 import dvr_gl
 from dvr_gl import metrics, reference
-from dvr_gl.reference.common import box_rays, trilinear
+from dvr_gl.reference.common import box_rays
+from dvr_gl.model.field import trilinear
 from dvr_gl.reference.raycast import _jitter_per_pixel
 from dvr_gl.techniques import raycast
 

@@ -12,8 +12,8 @@ import pytest
 import dvr_gl
 from dvr_gl import metrics, reference
 from dvr_gl.data.phantoms import marschner_lobb, marschner_lobb_tf
-from dvr_gl.reference.common import trilinear, world_to_index
-from dvr_gl.reference.shading import gradient, sample_gradients
+from dvr_gl.model.field import trilinear, world_to_index
+from dvr_gl.model.field import gradient, sample_gradients
 from dvr_gl.techniques import get_technique
 
 from test_raycast import cameras, derived_tolerance

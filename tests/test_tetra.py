@@ -15,8 +15,10 @@ import pytest
 import dvr_gl
 from dvr_gl import Camera, Scene, TetMesh, TransferFunction
 from dvr_gl.model import mesh as M
+from dvr_gl.techniques import cell_order
 from dvr_gl.reference.common import ray_box
-from dvr_gl.reference.linear_segment import SegmentKnots, linear_segment
+from dvr_gl.model.transfer import SegmentKnots
+from dvr_gl.reference.linear_segment import linear_segment
 from dvr_gl.reference.mesh_rays import ray_tet_segments
 from dvr_gl.techniques import tetra
 
@@ -151,8 +153,8 @@ def test_mpvo_order_respects_depth_along_every_pixel():
     mesh = blocks_mesh(cells)
     cam = Camera((6.0, 4.0, 7.0), (1.0, 0.5, 1.5), fov=40)
     scene = Scene(mesh, TF, cam, 40, 40)
-    visible = M.visible_cells(mesh, TF)
-    order = M.mpvo_order(mesh, visible, scene)
+    visible = cell_order.visible_cells(mesh, TF)
+    order = cell_order.mpvo_order(mesh, visible, scene)
     assert sorted(order.cells.tolist()) == list(range(mesh.n_tets))
     assert order.gap_constraints > 0 and order.cycles_broken == 0
     rank = np.empty(mesh.n_tets, int)
@@ -206,7 +208,7 @@ def test_mpvo_through_zero_volume_cells_of_a_lattice_delaunay(renderer, counts, 
     for tf in (whole, part):
         for az, el in ((30, 20), (45, 35), (0, 0), (90, 45)):
             scene = Scene(mesh, tf, dvr_gl.default_camera(mesh, azimuth=az, elevation=el), 40, 40)
-            order = M.mpvo_order(mesh, M.visible_cells(mesh, tf), scene)
+            order = cell_order.mpvo_order(mesh, cell_order.visible_cells(mesh, tf), scene)
             assert order.cycles_broken == 0
             exact = dvr_gl.reference.exact(scene)
             ref = dvr_gl.reference.render(scene, technique="tetra")
@@ -220,8 +222,8 @@ def test_kahn_breaks_cycles_deterministically():
     src = np.array([0, 1, 2, 3])
     dst = np.array([1, 2, 0, 0])       # 0 -> 1 -> 2 -> 0 is a cycle; 3 -> 0
     depth = np.array([1.0, 3.0, 2.0, 0.5])
-    order, broken = M._kahn(cells, src, dst, depth, 4)
-    again, broken2 = M._kahn(cells, src, dst, depth, 4)
+    order, broken = cell_order._kahn(cells, src, dst, depth, 4)
+    again, broken2 = cell_order._kahn(cells, src, dst, depth, 4)
     assert broken == broken2 == 1
     assert order.tolist() == again.tolist()
     assert sorted(order.tolist()) == [0, 1, 2, 3]
@@ -254,7 +256,7 @@ def test_order_is_made_once_per_view(renderer):
     scene = Scene(mesh, TF, VIEWS["perspective"], 24, 24)
     renderer.render(scene, technique="tetra")
     calls = []
-    original = M.mpvo_order
+    original = cell_order.mpvo_order
 
     def counting(*args, **kwargs):
         calls.append(1)

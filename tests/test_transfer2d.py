@@ -13,7 +13,7 @@ import pytest
 
 import dvr_gl
 from dvr_gl import metrics, reference
-from dvr_gl.reference.shading import gradient_max
+from dvr_gl.model.field import gradient_max
 from dvr_gl.techniques import get_technique
 from dvr_gl.model.transfer2d import (Rectangle, Triangle, from_widgets, levoy_isocontours, levoy_region_boundaries,
                                load_tf2d_json)

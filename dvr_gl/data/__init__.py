@@ -27,7 +27,8 @@ import math
 
 import numpy as np
 
-from ..model.scene import TransferFunction, Volume
+from ..model.transfer_function import TransferFunction
+from ..model.volume import Volume
 
 __all__ = ["ct_head", "ct_head_tf", "synthetic", "synthetic_field", "synthetic_tf",
            "SYNTHETIC_EXTENT"]
@@ -154,7 +155,7 @@ def delaunay_ball(n_points: int = 4000, seed: int = 0):
 
 @functools.lru_cache(maxsize=2)
 def _delaunay_ball(n, seed):
-    from ..model.scene import TetMesh
+    from ..model.mesh import TetMesh
     rng = np.random.default_rng(seed)
     direction = rng.normal(size=(n, 3))
     direction /= np.linalg.norm(direction, axis=1, keepdims=True)

@@ -11,7 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..model.scene import TransferFunction, Volume
+from ..model.transfer_function import TransferFunction
+from ..model.volume import Volume
 
 
 def marschner_lobb(n=41, f_m=6.0, alpha=0.25):

@@ -95,7 +95,8 @@ def load_input(source, *, scalars=None, shape=None, dtype=None, spacing=None, or
     and ``origin`` apply to arrays and bundled data too; ``shape`` and ``dtype`` are for
     raw files. ``orientation`` (three letters such as ``"RAS"``: where the x, y and z
     axes point anatomically) replaces or supplies a volume's; a mesh takes none."""
-    from ..model.scene import TetMesh, Volume
+    from ..model.mesh import TetMesh
+    from ..model.volume import Volume
     if orientation is not None:
         orientation = dvr_io.parse_orientation(orientation)
         if isinstance(source, TetMesh) or is_mesh_input(source, shape, dtype):
@@ -154,7 +155,7 @@ def resolve_tf(spec, data, default="auto"):
     name, a JSON file (``dvr_gl.model.transfer.load_tf_json``; with "widgets" or "table", a 2D
     one, ``dvr_gl.model.transfer2d.load_tf2d_json``, whose ranges default to the data's values
     and gradient magnitudes) or a TransferFunction (1D or 2D)."""
-    from ..model.scene import TransferFunction, TransferFunction2D
+    from ..model.transfer_function import TransferFunction, TransferFunction2D
     from ..model.transfer import load_tf_json
     if isinstance(spec, (TransferFunction, TransferFunction2D)):
         return "given", spec
@@ -175,7 +176,7 @@ def resolve_tf(spec, data, default="auto"):
     if os.path.isfile(spec):
         try:
             if _is_tf2d_file(spec):
-                from ..reference.shading import gradient_max
+                from ..model.field import gradient_max
                 from ..model.transfer2d import load_tf2d_json
                 return spec, load_tf2d_json(spec, data.data_range, (0.0, gradient_max(data)))
             return spec, load_tf_json(spec)
@@ -199,7 +200,7 @@ def first_camera(data, azimuth=None, elevation=None, zoom=1.0, fov=30.0, ortho=F
     (for a volume with an anatomical orientation, the eye in front of the face with the
     head up; otherwise looking along -z with +y up), turned by ``azimuth`` and
     ``elevation``, which default to an oblique FIRST_AZIMUTH, FIRST_ELEVATION."""
-    from ..model.scene import anatomical_frame, default_camera
+    from ..model.camera import anatomical_frame, default_camera
     frame = anatomical_frame(data)
     azimuth = FIRST_AZIMUTH if azimuth is None else azimuth
     elevation = FIRST_ELEVATION if elevation is None else elevation
@@ -223,7 +224,7 @@ def shading_for(technique, mode="composite", optical_model="emission_absorption"
 def parse_light(text):
     """A light from text: ``headlight``, ``world:X,Y,Z`` or ``view:X,Y,Z`` (the direction
     towards the light), each optionally followed by ``:INTENSITY``."""
-    from ..model.scene import Light
+    from ..model.camera import Light
     parts = str(text).strip().split(":")
     space = parts[0].strip().lower()
     try:
@@ -245,7 +246,7 @@ def render(source, *, tf=None, technique=None, size=(512, 512), azimuth=None, el
            orientation=None, backend="auto", **options):
     """Render ``source`` (anything :func:`load_input` takes) in one call; returns the
     (height, width, 4) float32 premultiplied RGBA image, row 0 on top, as a
-    :class:`dvr_gl.frontends.notebook.RenderedImage` (an ndarray that Jupyter shows as a picture).
+    :class:`dvr_gl.frontends.images.RenderedImage` (an ndarray that Jupyter shows as a picture).
 
     >>> image = dvr_gl.render("ct.nrrd", azimuth=30, elevation=20)          # doctest: +SKIP
     >>> image = dvr_gl.render(np.random.rand(32, 32, 32), tf="auto")          # doctest: +SKIP
@@ -282,5 +283,5 @@ def render(source, *, tf=None, technique=None, size=(512, 512), azimuth=None, el
     renderer = _RENDERERS.get(backend)
     if renderer is None:
         renderer = _RENDERERS[backend] = Renderer(backend=backend)
-    from .notebook import RenderedImage      # shows itself in Jupyter; a plain array otherwise
+    from .images import RenderedImage        # shows itself in Jupyter; a plain array otherwise
     return RenderedImage(renderer.render(scene, technique=technique, **options))

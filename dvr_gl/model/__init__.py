@@ -1,0 +1,22 @@
+"""The data model: plain, validated data that knows nothing of GL or of files.
+
+- ``volume``: :class:`Volume`, a structured grid; ``mesh``: :class:`TetMesh` and what is
+  derived once per mesh (connectivity, face planes, each cell's linear field);
+- ``transfer_function``: :class:`TransferFunction` and :class:`TransferFunction2D`;
+  ``transfer``: their lookup and knot tables, opacity correction and presets;
+  ``transfer2d``: 2-D transfer functions built from widgets; ``preintegration``: the
+  pre-integrated segment table;
+- ``camera``: :class:`Camera`, :class:`Light`, default views; ``scene``: :class:`Scene`;
+- ``field``: the field between samples (interpolation, gradients), read alike by the
+  techniques, their NumPy twins and the exact integrator;
+- ``cell_split``: hexahedra, wedges and pyramids into tetrahedra; ``checks``: argument checks.
+"""
+
+from .camera import Camera, Light, anatomical_frame, default_camera
+from .mesh import TetMesh
+from .scene import Scene
+from .transfer_function import TransferFunction, TransferFunction2D
+from .volume import Volume
+
+__all__ = ["Camera", "Light", "Scene", "TetMesh", "TransferFunction", "TransferFunction2D", "Volume",
+           "anatomical_frame", "default_camera"]

@@ -202,7 +202,8 @@ def grid_to_tets(volume):
     diagonal in every cell makes it conforming. The mesh's linear field differs from the
     grid's trilinear one inside a cell, but both agree at the samples and on cell edges.
     A masked volume (``mask_nonfinite``) leaves out the cells outside its domain."""
-    from .scene import TetMesh, Volume
+    from .mesh import TetMesh
+    from .volume import Volume
 
     if not isinstance(volume, Volume):
         raise TypeError(f"volume must be a dvr_gl.Volume, got {type(volume).__name__}")

@@ -106,7 +106,7 @@ from numbers import Integral, Real
 
 import numpy as np
 
-from .scene import TransferFunction
+from .transfer_function import TransferFunction
 
 # 512 nodes: a cell is 1/511 of the value range, fine enough that the bilinear error of a
 # narrow feature is confined to a couple of cells, and the table (4 MiB of RGBA32F) builds

@@ -16,7 +16,8 @@ import os
 
 import numpy as np
 
-from .scene import TetMesh, TransferFunction
+from .mesh import TetMesh
+from .transfer_function import TransferFunction
 
 LUT_SIZE = 4096
 
@@ -75,7 +76,6 @@ class LookupTable:
         ``alpha_L = 1 - (1 - alpha)^(L/u)`` (from the float32 entries, in float64). The
         ray caster interpolates it for every full-length segment instead of correcting
         each sample (GLSL ``lookupStepTF``); the difference is ``step_table_error``."""
-        from ..reference.common import correct_opacity
         a = self.table[:, 3].astype(np.float64)
         corrected = correct_opacity(a, length_over_unit, self.transparency.astype(np.float64))
         out = np.empty((self.size, 4))
@@ -87,7 +87,6 @@ class LookupTable:
         """Largest difference, over values between the entries, between interpolating
         ``step_table`` and correcting the interpolated entry (what a sample gets either
         way, float64): the price of the table, per segment."""
-        from ..reference.common import correct_opacity
         f = np.linspace(0.0, 1.0, per_interval + 1)[1:-1]
         t = self.table.astype(np.float64)
         w = self.transparency.astype(np.float64)
@@ -215,7 +214,7 @@ def ct_preset(data, kind="ct") -> TransferFunction:
 #: the usual soft-tissue window (W400 L40) puts stored 0, the air around the body, at
 #: -160 HU, inside ``ct``'s skin veil, and cuts bone off at 240 HU, below where ``ct``
 #: makes it opaque; on a chest CT windowed to 8 bits, W1000 L100 shows skin, heart and
-#: ribs (README, "The first picture"). ``NAME:LO,HI`` gives the window the data was made with.
+#: ribs (docs/guide/install.md, "The first picture"). ``NAME:LO,HI`` gives the window the data was made with.
 CT_8BIT_WINDOWS = {"ct_8bit": (-400.0, 600.0), "ct_bone_8bit": (-500.0, 1300.0), "ct_lung_8bit": (-1350.0, 150.0)}
 #: the highest stored value of 8-bit data: the window's top
 STORED_MAX = 255.0
@@ -374,3 +373,60 @@ def save_tf_json(path, tf: TransferFunction):
             "}\n")
     atomic_write(os.fspath(path), text.encode("utf-8"))
     return path
+
+
+def correct_opacity(alpha, length_over_unit, transparency=None):
+    """Opacity of a segment ``length_over_unit`` unit distances long whose unit-distance
+    opacity is ``alpha``: ``1 - (1 - alpha)^(L/u)``, computed as
+    ``-expm1(L/u * log(1 - alpha))`` so small opacities keep their relative precision
+    (GLSL ``correctOpacity``). ``log(1 - alpha)`` is taken from ``alpha`` up to 0.5 and
+    from ``transparency`` (= 1 - alpha, precise near 1) above, when it is given.
+    alpha = 1 gives 1 for any positive length; a zero length gives 0."""
+    a = np.asarray(alpha, np.float64)
+    x = np.asarray(length_over_unit, np.float64)
+    b = 1 - a if transparency is None else np.asarray(transparency, np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        log_t = np.where(a <= 0.5, np.log1p(-np.minimum(a, 0.5)), np.log(np.maximum(b, 0)))
+        out = -np.expm1(x * log_t)
+    return np.where(x <= 0, 0.0, np.where((a >= 1) | (b <= 0), 1.0, out))
+
+
+class SegmentKnots:
+    """The transfer function as the shader's knot table: positions, colour, opacity and
+    transparency (1 - opacity, exact from the control points) at every knot. A single
+    knot is doubled so that every value lies in (or beyond) one interval."""
+
+    def __init__(self, tf):
+        k = tf.knots
+        if k.size == 1:
+            k = np.array([k[0], k[0] + 1.0])
+        self.s = k
+        self.color = tf.color(k)
+        self.alpha = tf.opacity(k)
+        self.transparency = 1.0 - self.alpha
+        self.inv_unit = 1.0 / tf.unit_distance
+
+    @property
+    def count(self):
+        return self.s.size
+
+    def texture_rows(self):
+        """(2, count, 4) float32: row 0 (s, r, g, b), row 1 (alpha, 1 - alpha, 0, 0)."""
+        rows = np.zeros((2, self.count, 4), np.float32)
+        rows[0, :, 0] = self.s
+        rows[0, :, 1:] = self.color
+        rows[1, :, 0] = self.alpha
+        rows[1, :, 1] = self.transparency
+        return rows
+
+    def at(self, j, s):
+        """(colour, alpha, transparency) at values s on the lines of intervals j (-1:
+        below the first knot, count - 1: above the last; constant there)."""
+        n = self.count
+        jj = np.clip(j, 0, n - 2)
+        f = (s - self.s[jj]) / (self.s[jj + 1] - self.s[jj])
+        f = np.where(j < 0, 0.0, np.where(j >= n - 1, 1.0, np.clip(f, 0.0, 1.0)))
+        c = self.color[jj] * (1 - f)[:, None] + self.color[jj + 1] * f[:, None]
+        a = self.alpha[jj] * (1 - f) + self.alpha[jj + 1] * f
+        w = self.transparency[jj] * (1 - f) + self.transparency[jj + 1] * f
+        return c, a, w

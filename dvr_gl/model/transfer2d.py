@@ -17,7 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .scene import TransferFunction2D, interval
+from .transfer_function import TransferFunction2D
+from .checks import interval
 from .transfer import read_json_object
 
 RESOLUTION = (256, 64)   # (values, gradient magnitudes)
@@ -77,7 +78,7 @@ class Rectangle:
 class Triangle:
     """Levoy's iso-contour opacity, Kniss's triangle widget: at gradient magnitude g, the
     opacity falls linearly from ``opacity`` at ``value`` to 0 at ``value +- thickness * g``.
-    Since |f - value| / g is about the distance to the iso-surface, this draws the surface
+    Since ``|f - value| / g`` is about the distance to the iso-surface, this draws the surface
     ``value`` about ``thickness`` world units thick wherever it is, however steep the field.
     Only gradient magnitudes in ``gradient`` (low, high; None: all) count."""
     value: float

@@ -1,8 +1,11 @@
-"""NumPy references (same plan as the GL path, float64) and the exact image."""
+"""NumPy references (same plan as the GL path, float64) and the exact image.
+
+The twins (``render``, one module per technique) follow the plan a technique makes, and
+so import its planning code; the exact image (``exact``) depends on the scene model
+alone, so that no defect of a technique can hide in its own judge."""
 
 from __future__ import annotations
 
-from ..techniques import check_options, get_technique
 # Imported here, not inside a function, so the package attribute `exact` is the function
 # for good: importing the submodule first would otherwise leave the module in its place.
 from .exact import exact
@@ -16,6 +19,8 @@ def render(scene, technique="raycast", step=None, *, lut_exact=False, **options)
     ``lut_exact=True`` classifies with the exact transfer function instead of its lookup
     table. Returns (H, W, 4) float64, premultiplied RGBA, row 0 on top."""
     import importlib
+
+    from ..techniques import check_options, get_technique   # the plan; the exact image needs no technique
     check_options(technique, options)
     plan = get_technique(technique).make_plan(scene, step, **options)
     module = importlib.import_module(f"{__name__}.{technique}")

@@ -9,6 +9,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..model.field import cell_is_valid, trilinear, world_to_index
+from ..model.transfer import correct_opacity
+
 
 def ray_box(origins, dirs, lo, hi, inside=None):
     """Entry and exit distances of rays against the box [lo, hi] (GLSL ``intersectBox``).
@@ -49,62 +52,6 @@ def box_rays(scene):
     world = origins.reshape(-1, 3)
     t0, t1 = ray_box(o, d, np.zeros(3), scene.volume.extent, inside=(world >= lo) & (world <= hi))
     return o, d, t0, t1
-
-
-def world_to_index(volume, points):
-    """World points (..., 3) to continuous sample indices (..., 3) in x, y, z order."""
-    return (np.asarray(points, np.float64) - volume.origin) / volume.spacing
-
-
-def trilinear(values, idx):
-    """Trilinear interpolation of ``values`` (nz, ny, nx) at continuous indices ``idx``
-    (..., 3) in x, y, z order, clamped to the domain (clamp-to-edge sampling)."""
-    nz, ny, nx = values.shape
-    upper = np.array([nx - 1, ny - 1, nz - 1], dtype=np.float64)
-    p = np.clip(idx, 0.0, upper)
-    i0 = np.minimum(np.floor(p).astype(np.int64), (upper - 1).astype(np.int64))
-    f = p - i0
-    x0, y0, z0 = i0[..., 0], i0[..., 1], i0[..., 2]
-    fx, fy, fz = f[..., 0], f[..., 1], f[..., 2]
-    v = values
-
-    def lerp(a, b, t):
-        # exact where a == b: a plateau samples to its value, not a value 1 ulp off
-        # (a Sabella peak search took a random sample of a plateau for its first)
-        return a + (b - a) * t
-
-    c00 = lerp(v[z0, y0, x0], v[z0, y0, x0 + 1], fx)
-    c10 = lerp(v[z0, y0 + 1, x0], v[z0, y0 + 1, x0 + 1], fx)
-    c01 = lerp(v[z0 + 1, y0, x0], v[z0 + 1, y0, x0 + 1], fx)
-    c11 = lerp(v[z0 + 1, y0 + 1, x0], v[z0 + 1, y0 + 1, x0 + 1], fx)
-    return lerp(lerp(c00, c10, fy), lerp(c01, c11, fy), fz)
-
-
-def cell_is_valid(volume, idx):
-    """True where the point (continuous indices) lies in a cell whose corners are all
-    finite; always True for volumes without masking."""
-    if volume.cell_valid is None:
-        return np.ones(np.shape(idx)[:-1], dtype=bool)
-    nz, ny, nx = volume.shape
-    upper = np.array([nx - 2, ny - 2, nz - 2])
-    c = np.clip(np.floor(idx).astype(np.int64), 0, upper)
-    return volume.cell_valid[c[..., 2], c[..., 1], c[..., 0]]
-
-
-def correct_opacity(alpha, length_over_unit, transparency=None):
-    """Opacity of a segment ``length_over_unit`` unit distances long whose unit-distance
-    opacity is ``alpha``: ``1 - (1 - alpha)^(L/u)``, computed as
-    ``-expm1(L/u * log(1 - alpha))`` so small opacities keep their relative precision
-    (GLSL ``correctOpacity``). ``log(1 - alpha)`` is taken from ``alpha`` up to 0.5 and
-    from ``transparency`` (= 1 - alpha, precise near 1) above, when it is given.
-    alpha = 1 gives 1 for any positive length; a zero length gives 0."""
-    a = np.asarray(alpha, np.float64)
-    x = np.asarray(length_over_unit, np.float64)
-    b = 1 - a if transparency is None else np.asarray(transparency, np.float64)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        log_t = np.where(a <= 0.5, np.log1p(-np.minimum(a, 0.5)), np.log(np.maximum(b, 0)))
-        out = -np.expm1(x * log_t)
-    return np.where(x <= 0, 0.0, np.where((a >= 1) | (b <= 0), 1.0, out))
 
 
 def classifier(plan, lut_exact=False):

@@ -61,7 +61,8 @@ import numpy as np
 
 from ..model.scene import Scene
 from .common import ray_box
-from .shading import gradient, gradient_epsilon, sample_terms, scene_lights, shade_blinn_phong
+from ..model.field import gradient, gradient_epsilon
+from .shading import sample_terms, scene_lights, shade_blinn_phong
 
 __all__ = ["exact", "VERSION"]
 
@@ -753,7 +754,7 @@ class _MeshExact(_Classified):
         self.mesh = scene.volume
         self.terms = sample_terms(scene, None)
         if self.terms is not None:
-            from ..techniques.tetra import cell_fields
+            from ..model.mesh import cell_fields
             self.gradients = cell_fields(self.mesh)[:, 0, :3]
             origins, dirs = scene.camera.rays(scene.width, scene.height)
             self.origins, self.dirs = origins.reshape(-1, 3), dirs.reshape(-1, 3)
@@ -855,7 +856,7 @@ class _MeshExact(_Classified):
     def shade(self, cells, dirs):
         """Shading with the tet's own gradient (the field is linear in each tet; the
         contract's central differences are a grid's), threshold ``gradient_epsilon``."""
-        from ..techniques.tetra import cell_fields
+        from ..model.mesh import cell_fields
         c = np.broadcast_to(self.tf.color(self.scene.iso_value), dirs.shape)
         g = cell_fields(self.mesh)[cells, 0, :3]
         return shade_blinn_phong(c, g, dirs, self.scene.phong, gradient_epsilon(self.mesh), scene_lights(self.scene))
@@ -875,7 +876,7 @@ def _sabella(scene, ex, o, d, t0, t1):
     integrator holds the model's colour at 0, as for absorption only), the peak value and
     its first position from the max search."""
     from .common import sabella_color
-    from .shading import depth_range
+    from ..model.field import depth_range
     intensity = ex.composite(o, d, t0, t1)[:, 3]
     peak, t_peak = ex.extreme(o, d, t0, t1, 1.0, where=True)
     out = np.zeros((len(t0), 4))

@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..model.transfer import SegmentKnots
 from .exact import _segmented_exclusive_sum
 
 MAX_PARTS = 16
@@ -43,47 +44,6 @@ DEEP = 30.0
 # Gauss-Legendre rules on [0, 1], by number of points
 GAUSS = {n: ((np.polynomial.legendre.leggauss(n)[0] + 1) / 2, np.polynomial.legendre.leggauss(n)[1] / 2)
          for n in (2, 3, 4, 8)}
-
-
-class SegmentKnots:
-    """The transfer function as the shader's knot table: positions, colour, opacity and
-    transparency (1 - opacity, exact from the control points) at every knot. A single
-    knot is doubled so that every value lies in (or beyond) one interval."""
-
-    def __init__(self, tf):
-        k = tf.knots
-        if k.size == 1:
-            k = np.array([k[0], k[0] + 1.0])
-        self.s = k
-        self.color = tf.color(k)
-        self.alpha = tf.opacity(k)
-        self.transparency = 1.0 - self.alpha
-        self.inv_unit = 1.0 / tf.unit_distance
-
-    @property
-    def count(self):
-        return self.s.size
-
-    def texture_rows(self):
-        """(2, count, 4) float32: row 0 (s, r, g, b), row 1 (alpha, 1 - alpha, 0, 0)."""
-        rows = np.zeros((2, self.count, 4), np.float32)
-        rows[0, :, 0] = self.s
-        rows[0, :, 1:] = self.color
-        rows[1, :, 0] = self.alpha
-        rows[1, :, 1] = self.transparency
-        return rows
-
-    def at(self, j, s):
-        """(colour, alpha, transparency) at values s on the lines of intervals j (-1:
-        below the first knot, count - 1: above the last; constant there)."""
-        n = self.count
-        jj = np.clip(j, 0, n - 2)
-        f = (s - self.s[jj]) / (self.s[jj + 1] - self.s[jj])
-        f = np.where(j < 0, 0.0, np.where(j >= n - 1, 1.0, np.clip(f, 0.0, 1.0)))
-        c = self.color[jj] * (1 - f)[:, None] + self.color[jj + 1] * f[:, None]
-        a = self.alpha[jj] * (1 - f) + self.alpha[jj + 1] * f
-        w = self.transparency[jj] * (1 - f) + self.transparency[jj + 1] * f
-        return c, a, w
 
 
 def mean_log1p(x):

@@ -65,5 +65,6 @@ def first_hits(scene, radius, points, colors, gradients=None):
 
 def lit_colors(scene, colors, gradients, dirs):
     """Straight colours of points lit with their gradients along the pixels' rays."""
-    from .shading import gradient_epsilon, scene_lights, shade_blinn_phong
+    from ..model.field import gradient_epsilon
+    from .shading import scene_lights, shade_blinn_phong
     return shade_blinn_phong(colors, gradients, dirs, scene.phong, gradient_epsilon(scene.volume), scene_lights(scene))

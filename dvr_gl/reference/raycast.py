@@ -9,10 +9,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from .common import (blend_under, box_rays, cell_is_valid, classified_segment, classifier, sabella_color, trilinear,
-                     world_to_index)
-from .shading import (RayLighting, depth_range, gradient, gradient_epsilon, sample_terms, scene_lights,
-                      shade_blinn_phong)
+from .common import blend_under, box_rays, classified_segment, classifier, sabella_color
+from ..model.field import cell_is_valid, trilinear, world_to_index
+from .shading import RayLighting, sample_terms, scene_lights, shade_blinn_phong
+from ..model.field import depth_range, gradient, gradient_epsilon
 
 ISO_BISECTION_STEPS = 16  # as ISO_BISECTION_STEPS in shaders/common/isosurface.glsl
 

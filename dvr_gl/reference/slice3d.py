@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .common import (blend_over, box_rays, cell_is_valid, gap_pass, plane_inside, segment_colors, slab_segment,
-                     trilinear, world_to_index)
+from .common import blend_over, box_rays, gap_pass, plane_inside, segment_colors, slab_segment
+from ..model.field import cell_is_valid, trilinear, world_to_index
 from .shading import ray_lighting
 
 

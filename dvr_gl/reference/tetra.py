@@ -41,7 +41,7 @@ def render_plan(plan, lut_exact=False):
     if terms is None:
         rgba = linear_segment(plan.knots, seg["s0"][order], seg["s1"][order], length, model)
     else:   # each cell's terms are constant (its gradient is): see shaders/tetra/tetra.frag
-        from ..techniques.tetra import cell_fields
+        from ..model.mesh import cell_fields
         grads = cell_fields(scene.volume)[seg["tet"][order], 0, :3]
         dirs = scene.camera.rays(W, H)[1].reshape(-1, 3)[pix]
         factor, offset, scale = terms.at(np.zeros_like(dirs), dirs, grad=grads, depth_cue=False)
