@@ -625,7 +625,7 @@ def test_screenshot_key_writes_atomically(open_viewer, tmp_path, monkeypatch):
         writes.append(path)
         return real(path, payload)
 
-    monkeypatch.setattr(dvr_io, "atomic_write", recording)
+    monkeypatch.setattr(dvr_io.images, "atomic_write", recording)     # where save_png looks it up
     monkeypatch.chdir(tmp_path)
     v = head_viewer(open_viewer)                        # no --screenshot: numbered names
     v.refine()
@@ -902,7 +902,7 @@ def test_mesh_opens_with_tetra_and_shows_the_ball(mesh_viewer):
     shown = _ball_region(pixels, top)
     assert shown.max() > 100 and (shown.max(axis=2) > 20).mean() > 0.03
     # the editor's histogram counts the mesh's point scalars
-    from dvr_gl.frontends.viewer_overlay import data_histogram
+    from dvr_gl.frontends.viewer.overlay import data_histogram
     e = v.editor
     assert e.lo <= v.volume.data_range[0] and e.hi >= v.volume.data_range[1]
     assert np.allclose(e.histogram, data_histogram(v.volume, e.lo, e.hi)) and e.histogram.max() == 1.0
