@@ -31,7 +31,7 @@ MOVED = {
     "dvr_gl.notebook": "dvr_gl.frontends.notebook",
     "dvr_gl.demo": "dvr_gl.frontends.demo",
     "dvr_gl.viewer": "dvr_gl.frontends.viewer",
-    "dvr_gl.viewer_overlay": "dvr_gl.frontends.viewer_overlay",
+    "dvr_gl.viewer_overlay": "dvr_gl.frontends.viewer.overlay",
     "dvr_gl.bench_all": "dvr_gl.bench.all",
     "dvr_gl.bench_mesh": "dvr_gl.bench.mesh",
     "dvr_gl.bench_particles": "dvr_gl.bench.particles",

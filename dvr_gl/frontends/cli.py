@@ -35,8 +35,8 @@ PROG = "dvr-gl"
 # ----------------------------------------------------------------------------- the parser
 
 def build_parser(bench_module=None):
-    """The argument parser; ``bench_module`` (dvr_gl.bench.raycast, if loaded) adds its options."""
-    from .. import __version__
+    """The argument parser; ``bench_module`` (dvr_gl.bench.cli, if loaded) adds its options."""
+    from .._version import __version__
 
     parser = argparse.ArgumentParser(
         prog=PROG, description="Direct volume rendering with OpenGL, headless (EGL or OSMesa).")
@@ -95,7 +95,7 @@ def cmd_info(args, out=None):
     if getattr(args, "file", None) is not None:
         return cmd_info_file(args, out)
     import numpy
-    from .. import __version__
+    from .._version import __version__
     try:
         import moderngl
         mgl = getattr(moderngl, "__version__", "?")
@@ -242,7 +242,8 @@ def _describe_tf(name, tf):
 def cmd_render(args, out=None):
     out = out or sys.stdout
     from .inputs import FIRST_AZIMUTH, FIRST_ELEVATION, first_camera, shading_for
-    from ..model.scene import Scene, TransferFunction2D
+    from ..model.scene import Scene
+    from ..model.transfer_function import TransferFunction2D
     from ..techniques.common import SHADING_TECHNIQUES
 
     check_png(args.out)
@@ -317,10 +318,10 @@ def cmd_render(args, out=None):
         args.background = (0.0, 0.0, 0.0) if args.optical_model == "emission" else (1.0, 1.0, 1.0)
     t_load = time.perf_counter() - t0
 
-    import dvr_gl
+    from ..rendering.renderer import Renderer
     renderer_kwargs = {"backend": args.backend}
     t1 = time.perf_counter()
-    with dvr_gl.Renderer(**renderer_kwargs) as renderer:
+    with Renderer(**renderer_kwargs) as renderer:
         t2 = time.perf_counter()
         image = renderer.render(scene, **render_kwargs)
         t3 = time.perf_counter()
@@ -411,14 +412,14 @@ def cmd_view(args):
 
 
 def _load_bench(argv):
-    """dvr_gl.bench.raycast when the command is ``bench`` (its options join the parser), else None."""
+    """dvr_gl.bench.cli when the command is ``bench`` (its options join the parser), else None."""
     command = next((a for a in argv if not a.startswith("-")), None)
     if command != "bench":
         return None
     try:
-        return importlib.import_module("dvr_gl.bench.raycast")
+        return importlib.import_module("dvr_gl.bench.cli")
     except ModuleNotFoundError as e:
-        if e.name != "dvr_gl.bench.raycast":
+        if e.name != "dvr_gl.bench.cli":
             raise
         return None
 

@@ -12,7 +12,8 @@ import time
 import numpy as np
 
 from .. import data, metrics, reference
-from ..model.scene import Camera, Scene, default_camera
+from ..model.camera import Camera, default_camera
+from ..model.scene import Scene
 from ..techniques import for_scene, get_technique
 
 TILE = 192  # pixels; small enough that the exact images take seconds, not minutes

@@ -28,7 +28,8 @@ import math
 
 import numpy as np
 
-from ..model.scene import TetMesh, TransferFunction
+from ...model.mesh import TetMesh
+from ...model.transfer_function import TransferFunction
 
 HISTOGRAM_BINS = 128
 CURVE_SAMPLES = 256
