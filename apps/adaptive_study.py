@@ -21,7 +21,7 @@ skipping on); the error is the RMSE against ``reference.exact`` at 128x128; unif
 steps are marched the same way. Samples are classified with the exact TF and exact
 opacity correction, so only the sampling differs.
 
-    python apps/adaptive_study.py [--out docs/adaptive_study.md]
+    python apps/adaptive_study.py [--out docs/notes/adaptive_study.md]
 """
 
 import argparse
@@ -36,7 +36,8 @@ import dvr_gl
 from dvr_gl import metrics, reference
 from dvr_gl.formats import atomic_write
 from dvr_gl.util.progress import Progress
-from dvr_gl.reference.common import box_rays, trilinear
+from dvr_gl.reference.common import box_rays
+from dvr_gl.model.field import trilinear
 from dvr_gl.techniques.raycast import BRICK, _block_reduce, brick_occupancy, brick_value_ranges
 from dvr_gl.model.transfer import LookupTable
 
@@ -166,7 +167,7 @@ def uniform_error_at(uniform, samples):
 
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--out", default=os.path.join(HERE, os.pardir, "docs", "adaptive_study.md"))
+    p.add_argument("--out", default=os.path.join(HERE, os.pardir, "docs", "notes", "adaptive_study.md"))
     p.add_argument("--size", type=int, default=128)
     args = p.parse_args(argv)
     sets = scenes()

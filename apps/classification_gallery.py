@@ -10,8 +10,8 @@ import os
 import numpy as np
 
 import dvr_gl
-from dvr_gl.bench.raycast import datasets
-from dvr_gl.reference.shading import gradient_max
+from dvr_gl.bench.common import datasets
+from dvr_gl.model.field import gradient_max
 from dvr_gl.model.transfer2d import gradient_modulated, levoy_isocontours, levoy_region_boundaries, load_tf2d_json
 
 HERE = os.path.dirname(os.path.abspath(__file__))

@@ -23,7 +23,7 @@ import time
 from PIL import Image, ImageDraw
 
 from dvr_gl.frontends import cli
-from dvr_gl.bench.raycast import DEFAULT_DATA_DIR
+from dvr_gl.bench.common import DEFAULT_DATA_DIR
 from dvr_gl.formats import raw_name_layout
 
 SKIP_SUFFIXES = (".raw.gz", ".bin", ".json", ".md")

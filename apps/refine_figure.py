@@ -11,7 +11,7 @@ import numpy as np
 
 import dvr_gl
 from dvr_gl import metrics, reference
-from dvr_gl.bench.raycast import datasets, figure_bytes
+from dvr_gl.bench.common import datasets, figure_bytes
 from dvr_gl.formats import atomic_write
 from dvr_gl.rendering.tolerance import median_seconds
 

@@ -5,7 +5,7 @@ Gaussian kernel at density 1 and 2, dvr_gl's ray caster at 1 and 0.5 voxel and V
 1 voxel; then, in the peer bench's views, frames at 512x512 of each, median of 5 taken
 round robin (ratios hold within the run). Writes a Markdown table.
 
-    LP_NUM_THREADS=2 python apps/splat_vs_vtk.py [--out docs/splat_vs_vtk.md]
+    LP_NUM_THREADS=2 python apps/splat_vs_vtk.py [--out docs/notes/splat_vs_vtk.md]
 """
 
 import argparse
@@ -15,7 +15,7 @@ import statistics
 
 import dvr_gl
 from dvr_gl import metrics, reference
-from dvr_gl.bench.raycast import datasets, interleaved_frames
+from dvr_gl.bench.common import datasets, interleaved_frames
 from dvr_gl.bench.particles import VIEWS
 from dvr_gl.formats import atomic_write
 from dvr_gl.util.progress import Progress
@@ -49,7 +49,7 @@ def scenes(size):
 
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--out", default=os.path.join(HERE, os.pardir, "docs", "splat_vs_vtk.md"))
+    p.add_argument("--out", default=os.path.join(HERE, os.pardir, "docs", "notes", "splat_vs_vtk.md"))
     p.add_argument("--size", type=int, default=512)
     p.add_argument("--error-size", type=int, default=128)
     p.add_argument("--repeats", type=int, default=5)

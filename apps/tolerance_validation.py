@@ -3,7 +3,7 @@ step model never saw: what ``dvr-gl render FILE --tolerance E`` gives (the auto 
 the first camera, lit), each against its exact image, beside the best step of a fixed
 ladder (2 .. 1/64 voxel) that meets E. Writes a Markdown table.
 
-    python apps/tolerance_validation.py [--out docs/tolerance.md] [--size 128]
+    python apps/tolerance_validation.py [--out docs/notes/tolerance.md] [--size 128]
 """
 
 import argparse
@@ -36,7 +36,7 @@ def scene_for(path, size):
 
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--out", default=os.path.join(HERE, os.pardir, "docs", "tolerance.md"))
+    p.add_argument("--out", default=os.path.join(HERE, os.pardir, "docs", "notes", "tolerance.md"))
     p.add_argument("--size", type=int, default=128)
     args = p.parse_args(argv)
     files = [f for f in FILES if os.path.exists(os.path.join(DATA, f))]

@@ -6,7 +6,7 @@ the fastest fixed setting at no more error than VTK's (the longest step of a lad
 way of sampling, whose RMSE is at most VTK's; the ways' candidates timed), all timed in
 the same run, frames interleaved. Writes Markdown tables.
 
-    LP_NUM_THREADS=2 python apps/tolerance_vs_vtk.py [--out docs/tolerance_vs_vtk.md]
+    LP_NUM_THREADS=2 python apps/tolerance_vs_vtk.py [--out docs/notes/tolerance_vs_vtk.md]
 """
 
 import argparse
@@ -17,7 +17,7 @@ import numpy as np
 
 import dvr_gl
 from dvr_gl import metrics, reference
-from dvr_gl.bench.raycast import datasets, interleaved_frames, oblique_camera
+from dvr_gl.bench.common import datasets, interleaved_frames, oblique_camera
 from dvr_gl.data.phantoms import marschner_lobb, marschner_lobb_tf
 from dvr_gl.formats import atomic_write
 from dvr_gl.util.progress import Progress
@@ -103,7 +103,7 @@ def scenes():
 
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--out", default=os.path.join(HERE, os.pardir, "docs", "tolerance_vs_vtk.md"))
+    p.add_argument("--out", default=os.path.join(HERE, os.pardir, "docs", "notes", "tolerance_vs_vtk.md"))
     p.add_argument("--size", type=int, default=512)
     p.add_argument("--error-size", type=int, default=128)
     p.add_argument("--repeats", type=int, default=5)

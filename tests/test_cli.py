@@ -247,7 +247,7 @@ def test_renderer_failure_exits_1(tiny, capsys, monkeypatch):
         def __init__(self, backend="auto"):
             raise RuntimeError("no OpenGL 3.3 core context could be created")
 
-    monkeypatch.setattr(dvr_gl, "Renderer", NoGL, raising=False)
+    monkeypatch.setattr("dvr_gl.rendering.renderer.Renderer", NoGL)
     code, _, err = _run(["render", d / "tiny.npy", "--out", d / "x.png"], capsys)
     assert code == 1 and "no OpenGL" in err and "Traceback" not in err
     assert not (d / "x.png").exists()
@@ -322,15 +322,15 @@ def test_demo_is_wired(capsys, monkeypatch, tmp_path):
 
 def test_bench_is_wired(capsys, monkeypatch):
     seen = []
-    fake = types.ModuleType("dvr_gl.bench.raycast")
+    fake = types.ModuleType("dvr_gl.bench.cli")
     fake.add_arguments = lambda parser: parser.add_argument("--quick", action="store_true")
     fake.run_bench = lambda args: seen.append(args.quick) or 3
-    monkeypatch.setitem(sys.modules, "dvr_gl.bench.raycast", fake)
+    monkeypatch.setitem(sys.modules, "dvr_gl.bench.cli", fake)
     assert _run(["bench", "--quick"], capsys)[0] == 3
     assert seen == [True]
     code, _, err = _run(["bench", "--slow"], capsys)  # the bench's own parser judges
     assert code == 2 and "--slow" in err
-    monkeypatch.setitem(sys.modules, "dvr_gl.bench.raycast", None)
+    monkeypatch.setitem(sys.modules, "dvr_gl.bench.cli", None)
     code, _, err = _run(["bench"], capsys)
     assert code == 2 and "not available" in err
 
@@ -582,7 +582,7 @@ def test_mesh_bench_quick_run(tmp_path, capsys):
     both sorts and VTK, dvr_gl's error far below 1e-3 and below VTK's, the CPU
     classification timed, results written."""
     pytest.importorskip("vtk")
-    from dvr_gl.bench import raycast as bench
+    from dvr_gl.bench import cli as bench
     parser = argparse.ArgumentParser()
     bench.add_arguments(parser)
     args = parser.parse_args(["--suite", "mesh", "--quick", "--datasets", "ball", "--out", str(tmp_path / "m")])
@@ -628,7 +628,7 @@ def test_render_particles_on_a_grid_and_a_mesh(renderer, tiny, tiny_mesh, capsys
 def _quick_bench(tmp_path, suite, *extra):
     """``dvr-gl bench --suite SUITE --quick`` with ``extra`` options, writing under
     tmp_path; returns (stdout, rows of the csv)."""
-    from dvr_gl.bench import raycast as bench
+    from dvr_gl.bench import cli as bench
     parser = argparse.ArgumentParser()
     bench.add_arguments(parser)
     args = parser.parse_args(["--suite", suite, "--quick", *extra, "--out", str(tmp_path / suite)])
@@ -649,7 +649,7 @@ def test_particles_bench_quick_run(tmp_path, capsys):
                                                  "VTK raycast 1 voxel"]
     assert float(rows[1]["rmse"]) < float(rows[0]["rmse"]) and int(rows[0]["particles"]) > 0
     assert float(rows[4]["rmse"]) < float(rows[3]["rmse"])          # splat: density 2 is closer to exact
-    from dvr_gl.bench import raycast as bench
+    from dvr_gl.bench import cli as bench
     parser = argparse.ArgumentParser()
     bench.add_arguments(parser)
     assert bench.run_bench(parser.parse_args(["--suite", "particles", "--repetitions-list", "0,4"])) == 2
@@ -690,7 +690,7 @@ def test_all_techniques_bench_quick_run(tmp_path, capsys):
     the VTK peers beside them, all files written, the Pareto front marked, the GPU memory
     counted, errors falling with each technique's quality parameter."""
     pytest.importorskip("vtk")
-    from dvr_gl.bench import raycast as bench, all as bench_all
+    from dvr_gl.bench import cli as bench, all as bench_all
     parser = argparse.ArgumentParser()
     bench.add_arguments(parser)
     args = parser.parse_args(["--suite", "all", "--quick", "--size", "64", "--out", str(tmp_path / "all")])

@@ -170,13 +170,13 @@ def test_bench_quick_smoke(renderer, tmp_path, monkeypatch, capsys):
     import argparse
     import json
 
-    from dvr_gl.bench import raycast as bench
+    from dvr_gl.bench import cli, raycast as bench
 
     monkeypatch.setenv("DVR_GL_CACHE", str(tmp_path / "cache"))
-    parser = bench.add_arguments(argparse.ArgumentParser())
+    parser = cli.add_arguments(argparse.ArgumentParser())
     args = parser.parse_args(["--quick", "--size", "24", "--repeats", "1", "--datasets", "head",
                               "--steps", "1", "--out", str(tmp_path / "b")])
-    assert bench.run_bench(args) == 0
+    assert cli.run_bench(args) == 0
     table = capsys.readouterr().out
     assert "VTK GPU raycast" in table and "dvr_gl raycast+skip" in table
     rows = json.loads((tmp_path / "b.json").read_text())["rows"]

@@ -38,10 +38,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import metrics
-from .raycast import _machine, _vtk_version, error_axes, figure_bytes, renderer_line, turning_frames
+from ..metrics import compare
 from ..formats import atomic_write
 from ..util.progress import Progress
+from .common import (error_axes, figure_bytes, fmt, load_mesh_dataset, machine_info, oblique_camera, renderer_line,
+                     turning_frames, vtk_version)
 
 CSV_FIELDS = ("scene", "kind", "technique", "parameter", "value", "width", "height", "ms_median", "ms_min",
               "first_ms", "rmse", "max_abs", "psnr", "gpu_mb", "error_size")
@@ -90,10 +91,10 @@ def render_options(technique, parameter, value, options, data):
 def scenes(names, size, data_dir=None):
     """[(name, kind, scene, turn)] of the requested names (missing files are skipped);
     ``turn(i)`` is the camera of timed frame i, half a degree further round each time."""
-    from .raycast import oblique_camera
     from ..data import ct_head, ct_head_tf, delaunay_ball, synthetic_tf
     from ..data.phantoms import marschner_lobb, marschner_lobb_tf
-    from ..model.scene import Scene, default_camera
+    from ..model.scene import Scene
+    from ..model.camera import default_camera
     out = []
 
     def add(label, kind, data, tf, camera_at):
@@ -114,7 +115,6 @@ def scenes(names, size, data_dir=None):
             add("Delaunay ball", "mesh", mesh, synthetic_tf(),
                 lambda az, m=mesh: default_camera(m, azimuth=az, elevation=20))
         elif name == "bluntfin":
-            from .mesh import load_mesh_dataset
             try:
                 mesh, tf = load_mesh_dataset("bluntfin", data_dir)
             except FileNotFoundError as e:
@@ -131,7 +131,7 @@ def run_all(args, err=None):
     """Run the suite; returns (rows, info, images) with images[(scene, label)] = (image,
     exact) at the error size, for the contact sheet."""
     err = err if err is not None else sys.stderr
-    import dvr_gl
+    from ..rendering.renderer import Renderer
     from ..reference.exact import exact as exact_image
     from . import vtk_peer
 
@@ -168,7 +168,7 @@ def run_all(args, err=None):
             memory = None
         else:
             base, opts = render_options(technique, parameter, value, options, scene.volume)
-            renderer = dvr_gl.Renderer(backend=args.backend)
+            renderer = Renderer(backend=args.backend)
             try:
                 def frame(s):
                     return renderer.render(s, technique=base, **opts)
@@ -180,7 +180,7 @@ def run_all(args, err=None):
                 image = frame(small)
             finally:
                 renderer.release()
-        e = metrics.compare(image, exact[name])
+        e = compare(image, exact[name])
         rows.append({"scene": name, "kind": kind, "technique": technique, "parameter": parameter,
                      "value": value, "width": scene.width, "height": scene.height,
                      "ms_median": 1e3 * statistics.median(times), "ms_min": 1e3 * min(times),
@@ -190,11 +190,11 @@ def run_all(args, err=None):
         progress.advance(label)
     progress.close()
     info = {"suite": "all", "size": args.size, "error_size": args.error_size, "repeats": args.repeats,
-            "quick": bool(args.quick), **_machine()}
-    with dvr_gl.Renderer(backend=args.backend) as r:
+            "quick": bool(args.quick), **machine_info()}
+    with Renderer(backend=args.backend) as r:
         info["dvr_gl"] = r.info()
     if peer is not None:
-        info["vtk"] = {"version": _vtk_version(), "renderer": peer.renderer_string()}
+        info["vtk"] = {"version": vtk_version(), "renderer": peer.renderer_string()}
         peer.close()
     return rows, info, (images, exact)
 
@@ -211,10 +211,6 @@ def pareto(rows):
     return front
 
 
-def _fmt(v, spec):
-    return "-" if v is None else format(v, spec)
-
-
 def markdown_table(rows):
     front = {id(r) for r in pareto(rows)}
     lines = ["| scene | technique | parameter | ms/frame | first frame ms | RMSE | max err | PSNR | GPU MB | Pareto |",
@@ -222,7 +218,7 @@ def markdown_table(rows):
     for r in rows:
         lines.append(f"| {r['scene']} | {r['technique']} | {r['parameter']} {r['value']} | "
                      f"{r['ms_median']:.1f} | {r['first_ms']:.0f} | {r['rmse']:.2e} | {r['max_abs']:.3f} | "
-                     f"{_fmt(r['psnr'], '.1f')} | {_fmt(r['gpu_mb'], '.1f')} | {'yes' if id(r) in front else ''} |")
+                     f"{fmt(r['psnr'], '.1f')} | {fmt(r['gpu_mb'], '.1f')} | {'yes' if id(r) in front else ''} |")
     return "\n".join(lines) + "\n"
 
 

@@ -3,7 +3,7 @@
 
 Data sets: the NASA blunt fin (187,395 tets), combustor (215,040) and LOX post (513,375)
 from the project's shared data folder, and the bundled Delaunay ball
-(``dvr_gl.data.delaunay_ball``), each with :func:`mesh_tf` and an oblique camera.
+(``dvr_gl.data.delaunay_ball``), each with ``dvr_gl.bench.common.mesh_tf`` and an oblique camera.
 
 Per data set and renderer:
 
@@ -26,58 +26,19 @@ not installed. ``t/VTK`` and ``err/VTK`` divide by VTK's row of the same data se
 
 from __future__ import annotations
 
-import os
 import statistics
 import sys
 import time
 
-import numpy as np
-
-from .. import metrics
-from .raycast import DEFAULT_DATA_DIR, _fmt, _machine, error_axes, figure_bytes, renderer_line, write_results
+from ..metrics import compare
 from ..util.progress import Progress
-from ..model.scene import Scene, TetMesh, TransferFunction, default_camera
+from ..model.scene import Scene
+from ..model.camera import default_camera
+from .common import error_axes, figure_bytes, fmt, load_mesh_dataset, machine_info, renderer_line, write_results
 
-MESHES = {  # name -> (file under the shared data folder, scalar array)
-    "bluntfin": (os.path.join("nasa_bluntfin", "bluntfin_tets.npz"), "Density"),
-    "combustor": (os.path.join("nasa_combustor", "comb_tets.npz"), "Density"),
-    "loxpost": (os.path.join("nasa_lox_post", "post_tets.npz"), "StagnationEnergy"),
-    "ball": (None, None),
-}
 CSV_FIELDS = ["dataset", "tets", "drawn", "renderer", "width", "sort_ms", "draw_ms", "ms_median", "ms_min",
               "error_size", "rmse", "max_abs", "psnr", "time_vs_vtk", "rmse_vs_vtk", "cycles_broken",
               "gap_constraints"]
-
-
-def load_mesh_dataset(name, data_dir=None):
-    """(mesh, tf) of a named data set."""
-    if name not in MESHES:
-        raise ValueError(f"unknown mesh data set {name!r}; choose from {', '.join(MESHES)}")
-    if name == "ball":
-        from ..data import delaunay_ball, synthetic_tf
-        return delaunay_ball(), synthetic_tf()
-    path, scalars = MESHES[name]
-    directory = data_dir or os.environ.get("DVR_GL_DATA") or DEFAULT_DATA_DIR
-    full = os.path.join(directory, path)
-    if not os.path.exists(full):
-        raise FileNotFoundError(f"{full} not found (set $DVR_GL_DATA to the shared data folder)")
-    z = np.load(full)
-    mesh = TetMesh(z["points"], z["tets"], z[scalars])
-    return mesh, mesh_tf(mesh)
-
-
-def mesh_tf(mesh):
-    """Blue to green to red over the 2nd to 98th percentile of the scalars, opacity rising
-    from 0 with a band at two thirds; unit distance 1/40 of the bounding-box diagonal, so
-    that the whole mesh is semi-transparent."""
-    lo, hi = (float(v) for v in np.percentile(mesh.scalars, [2, 98]))
-    if hi <= lo:
-        hi = lo + 1.0
-    at = lambda f: lo + f * (hi - lo)   # noqa: E731
-    return TransferFunction(
-        color=[(at(0.0), 0.15, 0.3, 0.9), (at(0.5), 0.2, 0.85, 0.3), (at(1.0), 0.95, 0.25, 0.1)],
-        opacity=[(at(0.0), 0.0), (at(0.55), 0.15), (at(0.67), 0.6), (at(0.8), 0.2), (at(1.0), 0.5)],
-        unit_distance=float(np.linalg.norm(mesh.extent)) / 40)
 
 
 def _camera(mesh, turn=0.0):
@@ -110,7 +71,8 @@ def _time_cpu_classification(scene, repeats=3):
     """Median seconds of Shirley-Tuchman's classification of the visible cells in NumPy
     (``dvr_gl.techniques.shirley_tuchman``): the CPU alternative to tetra's per-fragment clipping."""
     from ..techniques import shirley_tuchman
-    from ..model.mesh import topology, visible_cells
+    from ..model.mesh import topology
+    from ..techniques.cell_order import visible_cells
     mesh = scene.volume
     cells = visible_cells(mesh, scene.tf)
     cells = cells[~topology(mesh).flat[cells]]
@@ -130,7 +92,7 @@ def _current(gl):
 def run_mesh(args, err=None):
     """Run the suite; returns (rows, info)."""
     err = err if err is not None else sys.stderr   # looked up now: tests swap sys.stderr
-    import dvr_gl
+    from ..rendering.renderer import Renderer
     from ..reference.exact import exact as exact_image
 
     names = [n.strip() for n in args.datasets.split(",") if n.strip()]
@@ -151,7 +113,7 @@ def run_mesh(args, err=None):
     progress = Progress(len(names) * (3 + len(renderers) * (frames + 1)), stream=err)
     rows, info = [], {"cpu_classify_ms": {}}
     try:
-        with dvr_gl.Renderer(backend=args.backend) as gl:
+        with Renderer(backend=args.backend) as gl:
             info["dvr_gl"] = gl.info()
             for name in names:
                 progress.begin(f"{name}: loading")
@@ -185,7 +147,7 @@ def run_mesh(args, err=None):
                         plan = tetra.make_plan(scene, sort=sort, tables=gl.tables)
                         row = dict(sort_ms=1e3 * ts, draw_ms=1e3 * td, cycles_broken=plan.order.cycles_broken,
                                    gap_constraints=plan.order.gap_constraints, drawn=int(plan.draw.size))
-                    e = metrics.compare(image, exact)
+                    e = compare(image, exact)
                     progress.advance(f"{name}: {label} error")
                     row.update(dataset=name, tets=mesh.n_tets, renderer=label, width=args.size,
                                ms_median=1e3 * statistics.median(times), ms_min=1e3 * min(times),
@@ -200,16 +162,16 @@ def run_mesh(args, err=None):
         if v is not None:
             r["time_vs_vtk"] = r["ms_median"] / v["ms_median"]
             r["rmse_vs_vtk"] = r["rmse"] / v["rmse"] if v["rmse"] > 0 else None
-    info.update(_machine(), size=args.size, error_size=args.error_size, repeats=args.repeats, suite="mesh",
+    info.update(machine_info(), size=args.size, error_size=args.error_size, repeats=args.repeats, suite="mesh",
                 datasets=names, vtk_note=vtk_note)
     return rows, info
 
 
 def format_mesh_table(rows):
     head = ("data", "tets", "renderer", "sort ms", "draw ms", "ms/frame", "RMSE", "max err", "t/VTK", "err/VTK")
-    lines = [(r["dataset"], str(r["tets"]), r["renderer"], _fmt(r["sort_ms"], ".0f"), _fmt(r["draw_ms"], ".0f"),
-              _fmt(r["ms_median"], ".0f"), _fmt(r["rmse"], ".2e"), _fmt(r["max_abs"], ".3f"),
-              _fmt(r["time_vs_vtk"], ".2f"), _fmt(r["rmse_vs_vtk"], ".3f")) for r in rows]
+    lines = [(r["dataset"], str(r["tets"]), r["renderer"], fmt(r["sort_ms"], ".0f"), fmt(r["draw_ms"], ".0f"),
+              fmt(r["ms_median"], ".0f"), fmt(r["rmse"], ".2e"), fmt(r["max_abs"], ".3f"),
+              fmt(r["time_vs_vtk"], ".2f"), fmt(r["rmse_vs_vtk"], ".3f")) for r in rows]
     widths = [max(len(h), *(len(l[i]) for l in lines)) if lines else len(h) for i, h in enumerate(head)]
 
     def fmt_line(cells):

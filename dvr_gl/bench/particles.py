@@ -27,11 +27,13 @@ import time
 
 import numpy as np
 
-from .. import metrics
+from ..metrics import compare
 from ..util.cache import TableCache
-from .raycast import CHEST_FILE, _fmt, _machine, error_axes, figure_bytes, renderer_line, turning_frames, write_results
 from ..util.progress import Progress
-from ..model.scene import Scene, default_camera
+from ..model.scene import Scene
+from ..model.camera import default_camera
+from .common import (CHEST_FILE, chest_ct, chest_tf, error_axes, figure_bytes, fmt, load_mesh_dataset, machine_info,
+                     renderer_line, turning_frames, write_results)
 
 DATASETS = ("head", "chest", "bluntfin")
 MARKERS = (("splat density 1", "v"), ("splat density 2", "^"), ("VTK", "D"))   # the rest: squares
@@ -46,11 +48,9 @@ def _scene(name, size, data_dir):
         vol = ct_head()
         return Scene(vol, ct_head_tf(), _camera(vol, name), size, size), ("raycast", {"step": 0.5 * vol.min_spacing})
     if name == "chest":
-        from .raycast import chest_ct, chest_tf
         vol = chest_ct(os.path.join(data_dir, CHEST_FILE) if data_dir else None)
         return Scene(vol, chest_tf(vol), _camera(vol, name), size, size), ("raycast", {"step": 0.5 * vol.min_spacing})
     if name == "bluntfin":
-        from .mesh import load_mesh_dataset
         mesh, tf = load_mesh_dataset("bluntfin", data_dir)
         return Scene(mesh, tf, _camera(mesh, name), size, size), ("tetra", {})
     raise ValueError(f"unknown data set {name!r} for the particles suite; choose from {', '.join(DATASETS)}")
@@ -71,7 +71,7 @@ def _timed(gl, scene, name, technique, options, repeats):
 def run_particles(args, err=None):
     """Run the suite; returns (rows, info)."""
     err = err if err is not None else sys.stderr   # looked up now: tests swap sys.stderr
-    import dvr_gl
+    from ..rendering.renderer import Renderer
     from ..gl.context import current
     from ..reference.exact import exact as exact_image
     from ..techniques import particles as technique
@@ -81,7 +81,7 @@ def run_particles(args, err=None):
     progress = Progress(len(names) * (2 + 2 * len(reps) + 1), stream=err)
     rows, info = [], {"slopes": {}}
     try:
-        with dvr_gl.Renderer(backend=args.backend) as gl:
+        with Renderer(backend=args.backend) as gl:
             info["dvr_gl"] = gl.info()
             for name in names:
                 progress.begin(f"{name}: exact image")
@@ -104,7 +104,7 @@ def run_particles(args, err=None):
                     draw_one = _draw_seconds(gl, technique.make_plan(scene, tables=gl.tables))
                 errors = []
                 for R in reps:
-                    e = metrics.compare(gl.render(small, technique="particles", repetitions=R), exact)
+                    e = compare(gl.render(small, technique="particles", repetitions=R), exact)
                     errors.append(e["rmse"])
                     progress.advance(f"{name}: error at R={R}")
                     frame = _timed(gl, scene, name, "particles", {"repetitions": R}, args.repeats)
@@ -121,7 +121,7 @@ def run_particles(args, err=None):
                 if not scene.is_mesh:
                     others += [(f"dvr_gl splat density {k}", "splat", {"density": k}) for k in (1, 2)]
                 for label, other, options in others:
-                    e = metrics.compare(gl.render(small, technique=other, **options), exact)
+                    e = compare(gl.render(small, technique=other, **options), exact)
                     frame = _timed(gl, scene, name, other, options, args.repeats)
                     rows.append(_plain_row(name, label, args, frame, e))
                 if not scene.is_mesh and not args.no_vtk:
@@ -131,7 +131,7 @@ def run_particles(args, err=None):
                 progress.advance(f"{name}: {peer}, splat, VTK")
     finally:
         progress.close()
-    info.update(_machine(), size=args.size, error_size=args.error_size, repeats=args.repeats, suite="particles",
+    info.update(machine_info(), size=args.size, error_size=args.error_size, repeats=args.repeats, suite="particles",
                 datasets=names, repetitions=reps)
     return rows, info
 
@@ -153,7 +153,7 @@ def _vtk_row(name, scene, small, exact, args, err):
     step = scene.volume.min_spacing
     image, _ = vtk_peer.render_vtk(small, step, repeats=1, warmup=0)
     _, seconds = vtk_peer.render_vtk(scene, step, repeats=args.repeats, warmup=1)
-    return _plain_row(name, "VTK raycast 1 voxel", args, seconds, metrics.compare(image, exact))
+    return _plain_row(name, "VTK raycast 1 voxel", args, seconds, compare(image, exact))
 
 
 def _draw_seconds(gl, plan, repeats=3):
@@ -170,11 +170,11 @@ def _draw_seconds(gl, plan, repeats=3):
 
 def format_particles_table(rows):
     head = ("data", "renderer", "R", "particles", "gen ms", "gen/s", "draw ms", "drawn/s", "ms/frame", "RMSE")
-    lines = [(r["dataset"], r["renderer"], _fmt(r["repetitions"], "d"), _fmt(r["particles"], ",d"),
-              _fmt(r["generate_ms"], ".0f"),
-              _fmt(r["generate_per_s"] / 1e6, ".2f") + "M" if r["generate_per_s"] else "-", _fmt(r["draw_ms"], ".1f"),
-              _fmt(r["drawn_per_s"] / 1e6, ".1f") + "M" if r["drawn_per_s"] else "-",
-              _fmt(r["ms_median"], ".0f"), _fmt(r["rmse"], ".2e")) for r in rows]
+    lines = [(r["dataset"], r["renderer"], fmt(r["repetitions"], "d"), fmt(r["particles"], ",d"),
+              fmt(r["generate_ms"], ".0f"),
+              fmt(r["generate_per_s"] / 1e6, ".2f") + "M" if r["generate_per_s"] else "-", fmt(r["draw_ms"], ".1f"),
+              fmt(r["drawn_per_s"] / 1e6, ".1f") + "M" if r["drawn_per_s"] else "-",
+              fmt(r["ms_median"], ".0f"), fmt(r["rmse"], ".2e")) for r in rows]
     widths = [max(len(h), *(len(l[i]) for l in lines)) if lines else len(h) for i, h in enumerate(head)]
 
     def fmt_line(cells):

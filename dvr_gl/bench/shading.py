@@ -33,10 +33,11 @@ import sys
 
 import numpy as np
 
-from .. import metrics
-from .raycast import _fmt, _load_datasets, _machine, interleaved_frames, renderer_line, write_results
+from ..metrics import compare, rmse
 from ..util.progress import Progress
 from ..model.scene import Scene
+from .common import (error_axes, figure_bytes, fmt, interleaved_frames, load_datasets, machine_info, renderer_line,
+                     write_results)
 
 ALL_TERMS = ("boundary", "silhouette", "tone", "depth_cue")
 # a variant: (lit, illustration terms, classified by the 2D TF gradient_modulated makes)
@@ -78,7 +79,7 @@ def variant(scene, lit_terms):
 def modulated_tf(volume, tf):
     """The data set's TF with Levoy's gradient-magnitude opacity modulation, as a 2D TF
     over the volume's gradient magnitudes (made once per volume and TF)."""
-    from ..reference.shading import gradient_max
+    from ..model.field import gradient_max
     from ..model.transfer2d import gradient_modulated
     return gradient_modulated(tf, (0.0, gradient_max(volume)))
 
@@ -107,7 +108,7 @@ def _timed_rows(gl, peers, name, scene, step_vox, repeats, progress, exact_image
             image = peers[lit_terms[0]].frame()
         else:
             image = gl.render(small, technique=technique, step=step, **opts)
-        err = metrics.compare(image, exact)
+        err = compare(image, exact)
         rows.append({"dataset": name, "step_voxels": step_vox, "renderer": label, "lit": lit_terms[0],
                      "terms": "+".join(lit_terms[1] + (("tf2d",) if lit_terms[2] else ())), "base": base,
                      "width": scene.width, "ms_median": 1e3 * float(np.median(ts)), "ms_min": 1e3 * min(ts),
@@ -130,7 +131,7 @@ def convergence(gl, size):
     from ..data.phantoms import marschner_lobb, marschner_lobb_tf
     from ..reference import render as reference_render
     from ..reference.exact import exact as exact_image
-    from ..model.scene import default_camera
+    from ..model.camera import default_camera
     volume = marschner_lobb(41)
     scene = Scene(volume, marschner_lobb_tf(), default_camera(volume, azimuth=30, elevation=20),
                   width=size, height=size, shading=True)
@@ -139,18 +140,18 @@ def convergence(gl, size):
     out = {"steps_voxels": list(CONVERGENCE_STEPS)}
     for technique in ("raycast", "slice3d"):
         opts = {"ert_transmittance": 0.0} if technique == "raycast" else {}
-        errors = [metrics.rmse(gl.render(scene, technique=technique, step=k * h, **opts), exact)
+        errors = [rmse(gl.render(scene, technique=technique, step=k * h, **opts), exact)
                   for k in CONVERGENCE_STEPS]
         out[technique] = errors
         out[technique + "_orders"] = [math.log2(a / b) for a, b in zip(errors, errors[1:])]
-    out["marcher_quarter"] = metrics.rmse(
+    out["marcher_quarter"] = rmse(
         reference_render(scene, "raycast", step=0.25 * h, lut_exact=True, ert_transmittance=0.0), exact)
     return out
 
 
 def run_shading(args, err=None):
     err = err if err is not None else sys.stderr
-    import dvr_gl
+    from ..rendering.renderer import Renderer
     from ..reference.exact import exact as exact_image
     names = [n.strip() for n in args.datasets.split(",") if n.strip()]
     steps = [float(s) for s in args.steps.split(",") if s.strip()]
@@ -161,12 +162,12 @@ def run_shading(args, err=None):
             peers = {False: VTKPeer(), True: VTKPeer()}
         except ImportError as e:
             print(f"dvr-gl bench: VTK not available ({e}); VTK rows skipped", file=err)
-    sets = _load_datasets(names, args.chest, err)
+    sets = load_datasets(names, args.chest, err)
     n_configs = sum(1 for c in CONFIGS if c[1] != "vtk" or peers)
     progress = Progress(len(sets) * (len(VARIANTS) + len(steps) * n_configs * (1 + args.repeats)) + 1, stream=err)
     rows, info = [], {}
     try:
-        with dvr_gl.Renderer(backend=args.backend) as gl:
+        with Renderer(backend=args.backend) as gl:
             info["dvr_gl"] = gl.info()
             for name, volume, tf, camera in sets:
                 scene = Scene(volume, tf, camera, width=args.size, height=args.size)
@@ -190,19 +191,19 @@ def run_shading(args, err=None):
             info["vtk"] = {"renderer": peers[False].renderer_string()}
         for peer in peers.values():
             peer.close()
-    info.update(_machine(), size=args.size, error_size=args.error_size, repeats=args.repeats, suite="shading",
+    info.update(machine_info(), size=args.size, error_size=args.error_size, repeats=args.repeats, suite="shading",
                 datasets=[n for n, *_ in sets], steps_voxels=steps)
     return rows, info
 
 
 def format_shading_table(rows):
     head = ("data", "step (voxel)", "renderer", "ms/frame", "cost", "t/VTK", "RMSE", "max err")
-    lines = [(r["dataset"], f"{r['step_voxels']:g}", r["renderer"], _fmt(r["ms_median"], ".1f"),
-              _fmt(r["cost"], ".2f"), _fmt(r["time_vs_vtk"], ".2f"), _fmt(r["rmse"], ".2e"),
-              _fmt(r["max_abs"], ".3f")) for r in rows]
+    lines = [(r["dataset"], f"{r['step_voxels']:g}", r["renderer"], fmt(r["ms_median"], ".1f"),
+              fmt(r["cost"], ".2f"), fmt(r["time_vs_vtk"], ".2f"), fmt(r["rmse"], ".2e"),
+              fmt(r["max_abs"], ".3f")) for r in rows]
     widths = [max(len(h), *(len(l[i]) for l in lines)) if lines else len(h) for i, h in enumerate(head)]
-    fmt = lambda cells: "| " + " | ".join(c.ljust(w) for c, w in zip(cells, widths)) + " |"   # noqa: E731
-    return "\n".join([fmt(head), "|" + "|".join("-" * (w + 2) for w in widths) + "|"] + [fmt(l) for l in lines])
+    fmt_line = lambda cells: "| " + " | ".join(c.ljust(w) for c, w in zip(cells, widths)) + " |"   # noqa: E731
+    return "\n".join([fmt_line(head), "|" + "|".join("-" * (w + 2) for w in widths) + "|"] + [fmt_line(l) for l in lines])
 
 
 def format_convergence(c):
@@ -225,7 +226,6 @@ def figure_png(rows, info) -> bytes:
     matplotlib.use("Agg", force=False)
     from matplotlib import colormaps
     from matplotlib.figure import Figure
-    from .raycast import error_axes, figure_bytes
 
     names = list(dict.fromkeys(r["dataset"] for r in rows))
     labels = list(dict.fromkeys(r["renderer"] for r in rows))
