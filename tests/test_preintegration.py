@@ -13,7 +13,7 @@ import pytest
 
 import dvr_gl
 from dvr_gl.gl import harness
-from dvr_gl.gl.programs import linear_filter_is_exact
+from dvr_gl.gl.capabilities import linear_filter_is_exact
 from dvr_gl.model.preintegration import (OPAQUE_SENTINEL, TABLE_SIZE, PreintegrationTable, build_table,
                                    exact_segment, length_correction_error, mean_extinction, opacity_support)
 

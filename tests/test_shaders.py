@@ -13,8 +13,10 @@ from dvr_gl.gl import harness
 from dvr_gl.gl.programs import ShaderSourceError, apply_defines, build_source, resolve_includes, resolve_text
 from dvr_gl.reference import common
 from dvr_gl.reference.raycast import refine_iso_bisection
-from dvr_gl.reference.shading import gradient, shade_blinn_phong
+from dvr_gl.model.field import gradient
+from dvr_gl.reference.shading import shade_blinn_phong
 from dvr_gl.model.transfer import LookupTable
+from dvr_gl.techniques.gpu import tf_texture, volume_texture
 
 U32 = 2.0 ** -24
 
@@ -139,7 +141,7 @@ def test_apply_tf_matches_lookup_table(ctx, renderer):
     s = np.concatenate([[-1e6, -100, -50, 0, 10, 10.5, 11, 250.5, 300, 1e6],
                         np.linspace(-120, 320, 500)]).astype(np.float32)
     gl = harness.evaluate(ctx, ["common/classification.glsl"], "out0 = vec4(applyTF(in0.x).rgb, transparencyTF(in0.x));",
-                          [np.c_[s, np.zeros((s.size, 3))]], textures={"t_tf": _made(renderer, renderer.tf_texture, lut)},
+                          [np.c_[s, np.zeros((s.size, 3))]], textures={"t_tf": _made(renderer, tf_texture, renderer, lut)},
                           uniforms={"u_tf_lo": lut.lo, "u_tf_scale": lut.scale, "u_tf_size": lut.size})
     ref = lut.lookup(s.astype(np.float64))
     ref[:, 3] = lut.lookup_transparency(s.astype(np.float64))
@@ -163,7 +165,7 @@ def test_classified_segment(ctx, renderer):
     lengths = np.concatenate([[0.0, 1e-6, 0.5, 1.0, 3.0, 100.0, 2.0, 0.25], rng.uniform(0, 4, 300)])
     inputs = np.c_[s, lengths, np.zeros((s.size, 2))].astype(np.float32)
     gl = harness.evaluate(ctx, ["common/classification.glsl"], "out0 = classifiedSegment(in0.x, in0.y);",
-                          [inputs], textures={"t_tf": _made(renderer, renderer.tf_texture, lut)},
+                          [inputs], textures={"t_tf": _made(renderer, tf_texture, renderer, lut)},
                           uniforms={"u_tf_lo": lut.lo, "u_tf_scale": lut.scale, "u_tf_size": lut.size})
     ref = common.classified_segment(lut.lookup, lut.lookup_transparency, inputs[:, 0].astype(np.float64),
                                     inputs[:, 1].astype(np.float64))
@@ -189,7 +191,7 @@ def _filter_path(ctx, texture_filter):
     """Both ways of interpolating textures: texel fetches in the shader (GPUs, whose filter
     weights are quantised), and the texture unit where the context's probe finds its
     weights exact (llvmpipe), as the program cache sets it."""
-    from dvr_gl.gl.programs import linear_filter_is_exact
+    from dvr_gl.gl.capabilities import linear_filter_is_exact
     if texture_filter and not linear_filter_is_exact(ctx):
         pytest.skip("this context's filter weights are quantised; the cache never sets the switch here")
     return {"TEXTURE_FILTER_EXACT": texture_filter}
@@ -203,7 +205,7 @@ def test_sample_volume_is_trilinear(ctx, renderer, small_volume, texture_filter)
     p[:8] = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)]) * v.extent  # corners
     p32 = p.astype(np.float32)
     gl = harness.evaluate(ctx, ["common/sampling.glsl"], "out0 = vec4(sampleVolume(in0.xyz));",
-                          [np.c_[p32, np.zeros(500)]], textures={"t_volume": _made(renderer, renderer.volume_texture, v)},
+                          [np.c_[p32, np.zeros(500)]], textures={"t_volume": _made(renderer, volume_texture, renderer, v)},
                           uniforms=_volume_uniforms(v), defines=_filter_path(ctx, texture_filter))[:, 0]
     ref = common.trilinear(v.values(), p32.astype(np.float64) / v.spacing)
     # llvmpipe filters float textures in float32: the texel position n*tc - 0.5 carries
@@ -222,7 +224,7 @@ def test_gradient_central_differences(ctx, renderer, small_volume, texture_filte
     p = rng.uniform(-0.1, 1.1, (300, 3)) * v.extent
     p32 = p.astype(np.float32)
     gl = harness.evaluate(ctx, ["common/shading.glsl"], "out0 = vec4(gradient(in0.xyz), 0.0);",
-                          [np.c_[p32, np.zeros(300)]], textures={"t_volume": _made(renderer, renderer.volume_texture, v)},
+                          [np.c_[p32, np.zeros(300)]], textures={"t_volume": _made(renderer, volume_texture, renderer, v)},
                           uniforms=_volume_uniforms(v), defines=_filter_path(ctx, texture_filter))[:, :3]
     ref = gradient(v, v.values(), p32.astype(np.float64) + v.origin)
     # each difference of two samples (error as above, ~1e-4) over 2 * spacing (>= 1)
@@ -267,7 +269,7 @@ def test_refine_iso_bisection(ctx, renderer, small_volume):
     o, d, ta, tb = o[straddle], d[straddle], ta[straddle], tb[straddle]
     gl = harness.evaluate(ctx, ["common/isosurface.glsl"],
                           "out0 = vec4(refineIsoBisection(in0.xyz, in1.xyz, in0.w, in1.w, 7.5));",
-                          [np.c_[o, ta], np.c_[d, tb]], textures={"t_volume": _made(renderer, renderer.volume_texture, v)},
+                          [np.c_[o, ta], np.c_[d, tb]], textures={"t_volume": _made(renderer, volume_texture, renderer, v)},
                           uniforms=_volume_uniforms(v))[:, 0]
     ref = refine_iso_bisection(lambda t: sample(t), ta, tb, iso)
     # both end within 0.6 / 2**16 of a crossing; where a midpoint sample lands within
@@ -318,5 +320,5 @@ def test_both_filter_paths_render_the_same_image(technique, options):
 
 def linear_filter_probe():
     from dvr_gl.gl.context import shared_context
-    from dvr_gl.gl.programs import linear_filter_is_exact
+    from dvr_gl.gl.capabilities import linear_filter_is_exact
     return linear_filter_is_exact(shared_context()[0])

@@ -9,17 +9,14 @@ pointing at real line numbers (the file is named in a ``// --- start of`` marker
 Defines: every switch a shader accepts is declared in its files as
 ``#ifndef NAME / #define NAME default / #endif``; the loader writes the chosen values
 right after ``#version`` and refuses names no included file declares. The cache adds the
-context's own switches (``context_defines``) to every program that declares them.
+context's own switches (``context_defines``, probed by ``capabilities``) to every program
+that declares them.
 """
 
 from __future__ import annotations
 
 import re
 from pathlib import Path
-
-import numpy as np
-
-from .context import current
 
 _INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$')
 _DECLARED = re.compile(r"^\s*#ifndef\s+([A-Z_][A-Z0-9_]*)\s*$", re.M)
@@ -106,46 +103,24 @@ def build_source(name: str, defines: dict | None = None) -> str:
     return apply_defines(resolve_includes(name), defines or {})
 
 
-def linear_filter_is_exact(ctx, tolerance=1e-5):
-    """Whether ``ctx``'s texture unit filters float textures with float weights: a two-texel
-    RGBA32F texture (0 and 1) read through ``texture()`` at 101 fractions between its
-    centres, against the fractions themselves. llvmpipe's are exact to float rounding;
-    GPUs commonly quantise the weights to 8 or 9 bits (errors up to ~2e-3), where tables
-    that need full precision are interpolated in the shader."""
-    from .harness import evaluate
-    frac = np.linspace(0.0, 1.0, 101)
-    inputs = np.zeros((frac.size, 4), np.float32)
-    inputs[:, 0] = frac
-    with current(ctx):
-        tex = ctx.texture((2, 1), 4, np.array([[0, 0, 0, 0], [1, 1, 1, 1]], np.float32).tobytes(), dtype="f4")
-        tex.filter = (ctx.LINEAR, ctx.LINEAR)
-        tex.repeat_x = tex.repeat_y = False
-    try:
-        out = evaluate(ctx, [], "out0 = texture(t_probe, vec2((in0.x + 0.5) / 2.0, 0.5));", [inputs],
-                       textures={"t_probe": tex}, preamble="uniform sampler2D t_probe;")
-    finally:
-        with current(ctx):
-            tex.release()
-    return bool(np.all(np.abs(out[:, 0] - frac) <= tolerance))
-
-
 class ProgramCache:
-    """Compiled programs per context, keyed by the shader files and the define set."""
+    """Compiled programs per context, keyed by the shader files and the define set.
+    ``probe(ctx)`` gives the context's own switches (``capabilities.context_defines``),
+    asked once, on first use."""
 
-    def __init__(self, ctx):
+    def __init__(self, ctx, probe):
         self.ctx = ctx
+        self._probe = probe
         self._programs = {}
         self._context_defines = None
         self.sources = {}  # key -> (vertex source, fragment source), for tests and debugging
 
     @property
     def context_defines(self):
-        """Switches that follow from the context, probed once: ``TEXTURE_FILTER_EXACT``
-        (common/sampling.glsl, common/preintegration.glsl), 1 where the texture unit's
-        linear filter is exact; else volumes, gradients, stacks and pre-integration tables
-        are interpolated in the shader from texel fetches."""
+        """Switches that follow from the context (``probe``), added to every program
+        that declares them."""
         if self._context_defines is None:
-            self._context_defines = {"TEXTURE_FILTER_EXACT": int(linear_filter_is_exact(self.ctx))}
+            self._context_defines = dict(self._probe(self.ctx))
         return self._context_defines
 
     def get(self, vertex: str, fragment: str, defines: dict | None = None, geometry: str | None = None):

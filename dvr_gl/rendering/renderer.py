@@ -1,5 +1,6 @@
-"""The GL renderer: one headless context, its program cache, and the GPU resources
-scenes need (made on first use, kept while the scene's objects live, never per frame)."""
+"""The GL renderer: one headless context, its program cache, and the store of GPU
+resources scenes need (``gl.resources.ResourceStore``: made on first use by the
+techniques, kept while the scene's objects live, never per frame)."""
 
 from __future__ import annotations
 
@@ -9,10 +10,12 @@ import math
 
 import numpy as np
 
-from ..gl.context import context_lost, current, describe, idle_framebuffer, shared_context
+from ..gl.capabilities import context_defines
+from ..gl.context import context_lost, current, describe, shared_context
 from ..gl.programs import ProgramCache
+from ..gl.resources import ResourceStore
 from ..util.progress import Progress
-from ..util.cache import LRU, IdentityKey as _Key, TableCache
+from ..util.cache import LRU, TableCache
 from ..techniques import check_options, get_technique
 
 
@@ -48,27 +51,15 @@ class Renderer:
         self._new_gpu_state()
 
     def _new_gpu_state(self):
-        """Empty caches of GPU objects for ``self.ctx``."""
-        self.programs = ProgramCache(self.ctx)
+        """An empty program cache and resource store for ``self.ctx``."""
+        self.programs = ProgramCache(self.ctx, context_defines)
         # probed now, not in the middle of a draw: the probe binds its own target and texture
         self.programs.context_defines
-        self.created = []  # a log of ("texture kind", shape) for every texture made
-        self._volumes = LRU(2)
-        self._tfs = LRU(4)
-        self._occupancy = LRU(4)
-        self._masks = LRU(2)
-        self._small = {}
-        self._stacks = LRU(3)
-        self._preint = LRU(2)
-        self._streams = {}
-        self._targets = LRU(6)
-        self._vbos = {}
-        self._vaos = {}
+        self.resources = ResourceStore(self.ctx)  # what techniques keep on the GPU, by kind and key
+        self.created = self.resources.created  # a log of (kind, shape or detail) for every resource made
         self.tables = TableCache()
         self._error_models = LRU(64)   # tolerance: pilot view and options -> tolerance.ErrorModel
         self._tolerance_picks = LRU(64)  # tolerance: pilot view, options and RMSE -> the Choice timed fastest
-        self._resources = {}  # kind -> LRU: what techniques keep on the GPU (see resource)
-        self._idle_fbo = idle_framebuffer(self.ctx)  # bound before any target is released
 
     # -- lifetime ---------------------------------------------------------------------
     def __enter__(self):
@@ -92,48 +83,15 @@ class Renderer:
         if context_lost(self.ctx):  # its objects are gone already
             return
         with current(self.ctx):
-            for cache in (self._volumes, self._tfs, self._occupancy, self._masks, self._targets, self._stacks,
-                          self._preint, *self._resources.values()):
-                cache.release()
-            streams = [obj for pair in self._streams.values() for obj in pair[1:]]
-            for obj in list(self._small.values()) + list(self._vaos.values()) + list(self._vbos.values()) + streams:
-                obj.release()
-            self._idle_fbo.use()
+            self.resources.release()    # leaves the idle framebuffer bound
             self.programs.release()
         # The context itself is shared by the process's renderers and stays (see
         # gl.context.shared_context).
 
     def gpu_bytes(self) -> int:
         """Bytes of every texture, buffer and render target the renderer holds in its
-        caches (its own bookkeeping; the driver's overheads are not counted)."""
-        import moderngl
-        seen = set()
-
-        def size(obj, depth=0):
-            if obj is None or id(obj) in seen or depth > 4:
-                return 0
-            seen.add(id(obj))
-            if isinstance(obj, (moderngl.Texture, moderngl.TextureArray, moderngl.Texture3D)):
-                dims = obj.size if isinstance(obj.size, tuple) else (obj.size,)
-                per = 4 if getattr(obj, "depth", False) else obj.components * int(obj.dtype[1])
-                return int(np.prod(dims)) * per
-            if isinstance(obj, moderngl.Buffer):
-                return int(obj.size)
-            if isinstance(obj, moderngl.Framebuffer):
-                return sum(size(t, depth + 1) for t in obj.color_attachments) + size(obj.depth_attachment, depth + 1)
-            if isinstance(obj, (moderngl.Context, moderngl.Program, moderngl.VertexArray)):
-                return 0
-            if isinstance(obj, dict):
-                return sum(size(v, depth + 1) for v in obj.values())
-            if isinstance(obj, (list, tuple)):
-                return sum(size(v, depth + 1) for v in obj)
-            if hasattr(obj, "__dict__") and not isinstance(obj, type):   # LRUs, technique resources
-                return sum(size(v, depth + 1) for k, v in vars(obj).items() if k != "ctx")
-            return 0
-
-        caches = (self._volumes, self._tfs, self._occupancy, self._masks, self._small, self._stacks, self._preint,
-                  self._streams, self._targets, self._vbos, self._resources)
-        return sum(size(c) for c in caches)
+        resource store (its own bookkeeping; the driver's overheads are not counted)."""
+        return self.resources.gpu_bytes()
 
     def info(self) -> dict:
         self._revive()
@@ -267,152 +225,10 @@ class Renderer:
         plan = tech.make_plan(scene, step, tables=self.tables, **options)
         return tech.draw(self, plan)
 
-    # -- resources (used by techniques) -------------------------------------------------
-    def resource(self, kind, *objects, make, capacity=2):
-        """What a technique keeps on the GPU for some scene objects (a mesh's textures, a
-        TF's table): ``make()`` once while those objects stay among the ``capacity``
-        most recent of this kind, released (if it has ``release``) when dropped and with
-        the renderer. Objects are keyed by identity (scene objects are immutable)."""
-        cache = self._resources.get(kind)
-        if cache is None:
-            cache = self._resources[kind] = LRU(capacity)
-
-        def logged():
-            value = make()
-            self.created.append((kind, tuple(type(o).__name__ for o in objects)))
-            return value
-        return cache.get(_Key(kind, *objects), logged)
-
-    def texture3d(self, kind, array, components, dtype, linear):
-        """A 3-D texture of ``array`` (nz, ny, nx[, components]), clamped at the edges,
-        linear or nearest filtered; logged in ``created``."""
-        nz, ny, nx = array.shape[:3]
-        tex = self.ctx.texture3d((nx, ny, nz), components, np.ascontiguousarray(array).tobytes(), dtype=dtype)
-        f = self.ctx.LINEAR if linear else self.ctx.NEAREST
-        tex.filter = (f, f)
-        tex.repeat_x = tex.repeat_y = tex.repeat_z = False
-        self.created.append((kind, array.shape))
-        return tex
-
-    def volume_texture(self, volume):
-        """The samples as float32 in data units: exact for 8- and 16-bit integers."""
-        return self._volumes.get(_Key(volume), lambda: self.texture3d(
-            "volume", volume.values(np.float32), 1, "f4", linear=True))
-
-    def cell_valid_texture(self, volume):
-        return self._masks.get(_Key(volume), lambda: self.texture3d(
-            "cell_valid", volume.cell_valid.astype(np.uint8) * 255, 1, "f1", linear=False))
-
-    def occupancy_texture(self, volume, tf, occupancy):
-        return self._occupancy.get(_Key(volume, tf), lambda: self.texture3d(
-            "occupancy", occupancy.astype(np.uint8) * 255, 1, "f1", linear=False))
-
-    def tf_texture(self, lut):
-        def make():
-            tex = self.ctx.texture((lut.size, 2), 4, lut.texture_rows().tobytes(), dtype="f4")
-            tex.filter = (self.ctx.NEAREST, self.ctx.NEAREST)
-            self.created.append(("tf", lut.table.shape))
-            return tex
-        return self._tfs.get(_Key(lut, "texture"), make)
-
-    def stack_texture(self, volume, axis):
-        """2-D slicing's stack along ``axis`` (0 = x, 1 = y, 2 = z): a texture array with one
-        float32 layer per sample plane, each layer the plane's samples with the lower of
-        the other two axes varying fastest. Made when a view first needs it, then kept."""
-        def make():
-            values = volume.values(np.float32)  # (z, y, x)
-            layers = {0: values.transpose(2, 0, 1), 1: values.transpose(1, 0, 2), 2: values}[axis]
-            layers = np.ascontiguousarray(layers)  # (layer, v, u)
-            n, h, w = layers.shape
-            tex = self.ctx.texture_array((w, h, n), 1, layers.tobytes(), dtype="f4")
-            tex.filter = (self.ctx.LINEAR, self.ctx.LINEAR)
-            tex.repeat_x = tex.repeat_y = False
-            self.created.append(("stack", (axis, n, h, w)))
-            return tex
-        return self._stacks.get(_Key(volume, axis), make)
-
-    def preintegration_texture(self, table, fine=None):
-        """The table's texture (``PreintegrationTable.texture_rows``); with ``fine`` (the
-        refined parts' table, raycast), that one's rows follow below
-        (``preintegratedSegmentIn``)."""
-        def make():
-            rows = [table.texture_rows()] + ([] if fine is None else [fine.texture_rows()])
-            data = np.ascontiguousarray(np.concatenate(rows))
-            tex = self.ctx.texture((table.size, data.shape[0]), 4, data.tobytes(), dtype="f4")
-            # linear for texture() where the filter is exact; texelFetch ignores it
-            tex.filter = (self.ctx.LINEAR, self.ctx.LINEAR)
-            tex.repeat_x = tex.repeat_y = False
-            self.created.append(("preintegration", (table.size, table.size)))
-            return tex
-        return self._preint.get(_Key(table, fine), make)
-
-    def small_texture(self, kind, table):
-        """A 2-D float32 table (jitter offsets), re-uploaded only when its values change."""
-        key = (kind, table.shape, table.tobytes())
-        tex = self._small.get(key)
-        if tex is None:
-            tex = self.ctx.texture((table.shape[1], table.shape[0]), 1, table.astype("f4").tobytes(), dtype="f4")
-            tex.filter = (self.ctx.NEAREST, self.ctx.NEAREST)
-            self.created.append((kind, table.shape))
-            self._small[key] = tex
-        return tex
-
-    def target(self, width, height, dtype, kind="target", components=4):
-        """A framebuffer with one texture of ``components`` channels of ``dtype`` (RGBA
-        for images), kept per size and ``kind`` (the image's own, or a technique's
-        auxiliary pass)."""
-        def make():
-            tex = self.ctx.texture((width, height), components, dtype=dtype)
-            self.created.append((kind, (height, width, dtype)))
-            return _Target(self.ctx.framebuffer([tex]), tex, self._idle_fbo)
-        return self._targets.get((kind, width, height, dtype, components), make).fbo
-
     def read_target(self, fbo, width, height):
         """Read back as float32 (GL finishes before this returns), row 0 on top."""
         data = fbo.read(viewport=(0, 0, width, height), components=4, dtype="f4")
         return np.frombuffer(data, np.float32).reshape(height, width, 4)[::-1].copy()
-
-    def proxy_vao(self, prog, kind):
-        from ..techniques.raycast import PROXY_MESHES
-        vbo = self._vbos.get(kind)
-        if vbo is None:
-            vbo = self._vbos[kind] = self.ctx.buffer(PROXY_MESHES[kind]().tobytes())
-        key = (prog.glo, kind)
-        vao = self._vaos.get(key)
-        if vao is None:
-            vao = self._vaos[key] = self.ctx.vertex_array(prog, [(vbo, "3f", "a_position")])
-        return vao
-
-
-    def empty_vao(self, prog):
-        """A vertex array without attributes (vertex shaders that place vertices by
-        gl_VertexID and gl_InstanceID)."""
-        key = (prog.glo, "empty")
-        vao = self._vaos.get(key)
-        if vao is None:
-            vao = self._vaos[key] = self.ctx.vertex_array(prog, [])
-        return vao
-
-    def stream_vao(self, prog, name, positions, indices):
-        """A vertex array of per-frame geometry: float32 positions (n, 3) and int32 indices
-        (n,) as attributes a_position and a_slice. The buffer is rewritten each frame
-        and grows (never shrinks) as needed."""
-        data = np.empty(len(positions), dtype=[("p", "f4", 3), ("i", "i4")])
-        data["p"] = positions
-        data["i"] = indices
-        raw = data.tobytes()
-        entry = self._streams.get(name)
-        if entry is not None and (entry[1].size < len(raw) or entry[0] != prog.glo):
-            entry[2].release()
-            entry[1].release()
-            entry = None
-        if entry is None:
-            vbo = self.ctx.buffer(reserve=max(2 * len(raw), 1 << 16), dynamic=True)
-            vao = self.ctx.vertex_array(prog, [(vbo, "3f 1i", "a_position", "a_slice")])
-            self._streams[name] = entry = (prog.glo, vbo, vao)
-        entry[1].write(raw)
-        entry[2].vertices = len(positions)
-        return entry[2]
 
 
 DEFAULT_MAX_TILE = 4096  # a 4096^2 RGBA32F target is 256 MiB
@@ -452,15 +268,3 @@ def check_image_memory(width, height, copies=1):
     if have is not None and need > have:
         raise ImageTooLarge(f"width x height {width}x{height}: the float32 RGBA image needs {need / 2**30:.1f} GiB "
                             f"and {have / 2**30:.1f} GiB of memory is available; render a smaller image")
-
-
-class _Target:
-    def __init__(self, fbo, tex, idle):
-        self.fbo = fbo
-        self.tex = tex
-        self.idle = idle
-
-    def release(self):
-        self.idle.use()
-        self.fbo.release()
-        self.tex.release()

@@ -14,8 +14,8 @@ argument turns the two finest into a reference image and an order:
 
 The error of each pilot step is then measured against ``R`` (not extrapolated from the
 finest pair: the order seen between fine steps understates how fast coarse steps lose
-accuracy, which made the first model over-predict coarse errors 1.1x to 3.2x, see the
-README); between the pilot steps the error is interpolated on a log-log scale, beyond
+accuracy, which made the first model over-predict coarse errors 1.1x to 3.2x, see
+docs/guide/tolerance.md); between the pilot steps the error is interpolated on a log-log scale, beyond
 them extended with the order of the nearest pair (at least 1). The step is the largest
 whose predicted error is ``SAFETY * E``, between ``MIN_STEP`` and ``MAX_STEP`` voxels; the
 pilot is then rendered at that step, its error measured and added to the model, and the

@@ -1,6 +1,6 @@
 """The techniques, by name. Each module offers ``make_plan(scene, step, **options)`` (the
 plan the GL path and the NumPy reference share), ``draw(renderer, plan)`` (renders into
-``renderer.target(...)`` and returns that framebuffer), ``MODES`` (the scene modes it
+the renderer's target, ``gpu.target_fbo``, and returns that framebuffer), ``MODES`` (the scene modes it
 renders), ``TAKES_STEP`` (whether ``step`` is an option) and ``DATA`` ("volume" for grids,
 "mesh" for TetMesh scenes, or a tuple of both); the reference of the same name lives in ``dvr_gl.reference``."""
 

@@ -1,6 +1,7 @@
 """What the techniques share: option checks, the uniforms every shader reads (camera,
 volume, transfer function), texture binding, and the eye-space projection of proxy
-geometry. Positions on the GPU are relative to the volume box's lower corner."""
+geometry. Positions on the GPU are relative to the volume box's lower corner. The GPU
+objects they keep between frames are made in ``gpu``."""
 
 from __future__ import annotations
 
@@ -8,7 +9,9 @@ import math
 
 import numpy as np
 
-from ..model.scene import MAX_LIGHTS, OPTICAL_MODELS, Scene
+from ..model.camera import MAX_LIGHTS
+from ..model.scene import OPTICAL_MODELS, Scene
+from .gpu import cell_valid_texture, gradient_texture, preintegration_texture, proxy_vao, target_fbo, tf2d_texture
 
 TARGETS = {"rgba32f": "f4", "rgba16f": "f2", "rgba8": "f1"}
 
@@ -149,7 +152,7 @@ def shading_defines(scene, gradients):
     classification.glsl) a scene needs: none for plain emission-absorption samples.
     ``gradients`` is "on_the_fly" (six field lookups per sample that needs one) or
     "texture" (one lookup in a gradient texture made once per volume: the same gradient,
-    see ``reference.shading.sample_gradients``, for three times the volume's memory)."""
+    see ``model.field.sample_gradients``, for three times the volume's memory)."""
     if gradients not in GRADIENTS:
         raise ValueError(f"gradients must be one of {', '.join(GRADIENTS)}, got {gradients!r}")
     defines = {}
@@ -172,23 +175,9 @@ def shading_defines(scene, gradients):
     return defines
 
 
-def gradient_texture(renderer, volume):
-    """The volume's sample gradients as an RGB32F 3D texture, kept with the volume."""
-    from ..reference.shading import sample_gradients
-
-    def make():
-        g = sample_gradients(volume, volume.values(np.float64)).astype(np.float32)
-        nz, ny, nx = volume.shape
-        tex = renderer.ctx.texture3d((nx, ny, nz), 3, np.ascontiguousarray(g).tobytes(), dtype="f4")
-        tex.filter = (renderer.ctx.LINEAR, renderer.ctx.LINEAR)
-        tex.repeat_x = tex.repeat_y = tex.repeat_z = False
-        return tex
-    return renderer.resource("gradient", volume, make=make)
-
-
 def illustration_uniforms(renderer, scene):
     """Uniforms of the illustration terms in shaders/common/shading.glsl."""
-    from ..reference.shading import depth_range, gradient_max
+    from ..model.field import depth_range, gradient_max
     terms = scene.illustration
     out = {}
     if "tone" in terms:
@@ -212,10 +201,10 @@ def add_optional_inputs(renderer, plan, textures, uniforms):
     masked-cell texture and the lighting."""
     scene = plan.scene
     if getattr(plan, "preint", None) is not None:
-        textures["t_preint"] = renderer.preintegration_texture(plan.preint, getattr(plan, "preint_fine", None))
+        textures["t_preint"] = preintegration_texture(renderer, plan.preint, getattr(plan, "preint_fine", None))
         uniforms.update(plan.preint.uniforms())
     if scene.volume.has_nonfinite:
-        textures["t_cell_valid"] = renderer.cell_valid_texture(scene.volume)
+        textures["t_cell_valid"] = cell_valid_texture(renderer, scene.volume)
     if scene.shaded or scene.illustration or scene.tf_2d is not None:
         uniforms.update(sample_term_uniforms(renderer, scene, plan.defines))
         if plan.defines.get("GRADIENT_TEXTURE"):
@@ -223,17 +212,6 @@ def add_optional_inputs(renderer, plan, textures, uniforms):
     if scene.tf_2d is not None:
         textures["t_tf2d"] = tf2d_texture(renderer, scene.tf_2d)
         uniforms.update(tf2d_uniforms(scene.tf_2d))
-
-
-def tf2d_texture(renderer, tf_2d):
-    """A TransferFunction2D's table and transparency rows (``texture_rows``) as an
-    RGBA32F texture read with texelFetch, kept with the function."""
-    def make():
-        rows = tf_2d.texture_rows()
-        tex = renderer.ctx.texture((rows.shape[1], rows.shape[0]), 4, rows.tobytes(), dtype="f4")
-        tex.filter = (renderer.ctx.NEAREST, renderer.ctx.NEAREST)
-        return tex
-    return renderer.resource("tf2d", tf_2d, make=make)
 
 
 def tf2d_uniforms(tf_2d):
@@ -247,7 +225,7 @@ def tf2d_uniforms(tf_2d):
 def sample_term_uniforms(renderer, scene, defines):
     """Uniforms of shaders/common/shading.glsl for a lit or illustrated scene: the
     gradient threshold, the lights and the illustration terms."""
-    from ..reference.shading import gradient_epsilon
+    from ..model.field import gradient_epsilon
     out = {"u_phong": scene.phong, "u_gradient_epsilon": gradient_epsilon(scene.volume),
            **illustration_uniforms(renderer, scene)}
     if defines.get("LIGHTS"):
@@ -311,7 +289,7 @@ def tile_matrix(scene):
 def cleared_target(renderer, scene, target):
     """The renderer's float target for this image size and format, bound and cleared to
     transparent black: where every technique draws."""
-    fbo = renderer.target(*scene.target_size, TARGETS[target])
+    fbo = target_fbo(renderer, *scene.target_size, TARGETS[target])
     fbo.use()
     fbo.clear(0.0, 0.0, 0.0, 0.0)
     return fbo
@@ -481,7 +459,7 @@ def draw_box_instances(renderer, prog, scene, instances):
         ctx.enable(ctx.CULL_FACE)
         ctx.cull_face = "front"
     try:
-        renderer.proxy_vao(prog, kind).render(instances=instances)
+        proxy_vao(renderer, prog, kind).render(instances=instances)
     finally:
         ctx.disable(ctx.CULL_FACE)
 

@@ -32,7 +32,7 @@ them uniformly; ``"metropolis"`` takes the same count and moves each particle by
 independence Metropolis chain inside its cell (``METROPOLIS_STEPS`` uniform proposals,
 accepted with ``min(1, tau' / tau)``), so positions follow ``tau`` within the cell. Both
 are biased where ``tau`` is not linear over a cell (the corner average is not the cell's
-integral); the README reports by how much.
+integral); docs/guide/particles.md reports by how much.
 
 Opacity 1 is infinite extinction; it is capped at ``alpha = 1 - 1e-6`` (``TAU_CAP``), a
 transmittance of 1e-6 per unit distance.
@@ -162,7 +162,7 @@ def generate(data, tf, radius, seed=0, repetition=0, sampler="rejection"):
 def particle_gradients(particle_set, data):
     """(N, 3) float32: the gradient at each particle, for lighting it. A grid's is the
     contract's gradient at the particle's centre; a mesh's, its cell's (constant)."""
-    from ..reference.shading import point_gradients
+    from ..model.field import point_gradients
     return point_gradients(data, particle_set.points, particle_set.owners).astype(np.float32)
 
 

@@ -12,13 +12,17 @@ none) and by larger repetition counts (set k is the same whatever the count). Gr
 
 Options (same names in ``dvr_gl.reference.render``)
 ---------------------------------------------------
-repetitions : int >= 1 (default 1), independent particle sets averaged.
-seed : int (default 0); set k draws from ``numpy.random.default_rng([seed, k])``.
+repetitions : int >= 1 (default 1)
+    independent particle sets averaged.
+seed : int (default 0)
+    set k draws from ``numpy.random.default_rng([seed, k])``.
 radius : world units (default: half a pixel at the data's centre, at most half a cell;
     ``particles.default_radius``).
     The particle count grows as 1 / radius^2, the bias as radius^2.
-sampler : "rejection" (Poisson candidates per cell thinned by tau(s) / tau_max: exact).
-target : "rgba32f" (default) | "rgba16f" | "rgba8": the averaged image's target.
+sampler : "rejection"
+    Poisson candidates per cell thinned by tau(s) / tau_max: exact.
+target : "rgba32f" (default) | "rgba16f" | "rgba8"
+    the averaged image's target.
 
 Particles are drawn as point sprites; a particle whose centre lies outside the view's
 clip volume is not drawn (GL clips points by their centre).
@@ -44,6 +48,7 @@ from ..util.progress import Progress
 from ..model.scene import Scene
 from .common import (cleared_target, SizedTarget, bind, camera_uniforms, check_scene, check_target, data_projection,
                      point_shading_defines, sample_term_uniforms)
+from .gpu import empty_vao
 
 POINT_SPRITES = True  # drawn as GL points, which are clipped by their centres (see Renderer.render)
 MODES = ("composite",)
@@ -152,8 +157,8 @@ def draw(renderer, plan):
     fbo = cleared_target(renderer, scene, plan.target)
     if plan.count == 0:
         return fbo
-    scratch = renderer.resource("particles_scratch", make=lambda: SizedTarget(ctx, depth=True), capacity=1).get(
-        *scene.target_size)
+    scratch = renderer.resources.for_objects("particles_scratch", make=lambda: SizedTarget(ctx, depth=True),
+                                             capacity=1).get(*scene.target_size)
     prog = renderer.programs.get("particles/particles.vert", "particles/particles.frag", plan.defines)
     average = renderer.programs.get("tetra/fullscreen.vert", "particles/average.frag")
     uniforms = {**camera_uniforms(scene), "u_radius": plan.radius, "u_pixels_per_unit": pixels_per_unit(scene),
@@ -167,9 +172,9 @@ def draw(renderer, plan):
         if particle_set.count == 0:
             continue
         gradients = None if plan.gradients is None else plan.gradients[k]
-        vao = renderer.resource("particles_vbo", particle_set, prog,
-                                make=lambda s=particle_set, g=gradients: _Points(ctx, prog, s, g),
-                                capacity=max(plan.repetitions, 2)).vao
+        vao = renderer.resources.for_objects("particles_vbo", particle_set, prog,
+                                             make=lambda s=particle_set, g=gradients: _Points(ctx, prog, s, g),
+                                             capacity=max(plan.repetitions, 2)).vao
         scratch.use()
         scratch.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
         ctx.enable(ctx.DEPTH_TEST)
@@ -181,7 +186,7 @@ def draw(renderer, plan):
         ctx.blend_func = ctx.ONE, ctx.ONE
         ctx.blend_equation = ctx.FUNC_ADD
         bind(average, {"t_image": scratch.color_attachments[0]}, {"u_weight": 1.0 / plan.repetitions})
-        renderer.empty_vao(average).render(ctx.TRIANGLES, vertices=3)
+        empty_vao(renderer, average).render(ctx.TRIANGLES, vertices=3)
         ctx.disable(ctx.BLEND)
     ctx.disable(ctx.PROGRAM_POINT_SIZE)
     return fbo

@@ -22,7 +22,8 @@ Texel centres are the samples: texture coordinate ``(p / spacing + 0.5) / n``.
 
 Options (same names in ``dvr_gl.reference.render``)
 ---------------------------------------------------
-target : "rgba32f" (default) | "rgba16f" | "rgba8" render target.
+target : "rgba32f" (default) | "rgba16f" | "rgba8"
+    render target.
 jitter_seed : None, or an int: the ray start is offset by a fraction of a step taken from
     a 64x64 table of uniform numbers drawn from ``numpy.random.default_rng(seed)`` and
     tiled over the image (uploaded as a texture; the reference reads the same table).
@@ -91,12 +92,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..util.cache import TableCache
+from ..util.cache import IdentityKey, TableCache
+from ..gl.resources import texture3d
 from ..model.scene import Scene
 from ..model.transfer import LookupTable
 from .common import (cleared_target, add_optional_inputs, bind, box_proxy, box_view, camera_uniforms, check_flag,
                      check_scene, grow_pixels, shading_defines,
                      check_step, check_target, preintegration_applies, preintegration_table, tf_uniforms, volume_uniforms)
+from .gpu import proxy_vao, target_fbo, tf_texture, volume_texture
 
 BRICK = 8            # brick edge in cells, for empty-space skipping
 MAX_REFINE = 64
@@ -210,7 +213,7 @@ def make_plan(scene, step=None, *, target="rgba32f", jitter_seed=None, ert_trans
             defines["SKIP_EMPTY"] = 1
         if refine > 1:
             defines["REFINE"] = 1
-            # a compile-time count: a uniform one cost the spike's frame 10 % (README)
+            # a compile-time count: a uniform one cost the spike's frame 10 % (docs/notes/raycast.md)
             defines["DETAIL_COUNT"] = max(len(detail), 1)
     defines.update(shading_defines(scene, gradients))
     step_rows = None
@@ -461,16 +464,16 @@ def occupied_range(renderer, plan):
     def make():
         faces = occupied_faces(occupied, volume, margin)
         return ctx.buffer(faces.tobytes()) if len(faces) else None
-    mesh = renderer.resource("occupied_faces", occupied, volume, margin, make=make)
+    mesh = renderer.resources.for_objects("occupied_faces", occupied, volume, margin, make=make)
     defines = {"ORTHO": 1} if scene.camera.is_ortho else {}
     prog = renderer.programs.get("raycast/occupied_range.vert", "raycast/occupied_range.frag", defines)
     bind(prog, {}, camera_uniforms(scene))
     prog["u_view_proj"].write(view_proj.astype("f4").tobytes())
-    fbo = renderer.target(*scene.target_size, "f4", kind="occupied_range", components=2)
+    fbo = target_fbo(renderer, *scene.target_size, "f4", kind="occupied_range", components=2)
     fbo.use()
     fbo.clear(3e38, 3e38, 0.0, 0.0)
     if mesh is not None:
-        vao = renderer.resource("occupied_faces_vao", mesh, prog, make=lambda: ctx.vertex_array(
+        vao = renderer.resources.for_objects("occupied_faces_vao", mesh, prog, make=lambda: ctx.vertex_array(
             prog, [(mesh, "3f 3f", "a_position", "a_normal")]))
         ctx.disable(ctx.DEPTH_TEST | ctx.CULL_FACE)
         ctx.enable(ctx.BLEND)
@@ -484,26 +487,6 @@ def occupied_range(renderer, plan):
 # ---------------------------------------------------------------------------------------
 # GL path
 
-def _unit_cube_back_face_mesh():
-    """36 vertices of the unit cube, every triangle wound counter-clockwise seen from
-    outside (so culling front faces leaves the back faces)."""
-    corners = np.array([[x, y, z] for z in (0, 1) for y in (0, 1) for x in (0, 1)], np.float64)
-    faces = [(0, 2, 6, 4), (1, 5, 7, 3), (0, 4, 5, 1), (2, 3, 7, 6), (0, 1, 3, 2), (4, 6, 7, 5)]
-    tris = []
-    centre = np.full(3, 0.5)
-    for a, b, c, d in faces:
-        for tri in ((a, b, c), (a, c, d)):
-            p = corners[list(tri)]
-            normal = np.cross(p[1] - p[0], p[2] - p[0])
-            if np.dot(normal, p.mean(axis=0) - centre) < 0:
-                p = p[::-1]
-            tris.append(p)
-    return np.array(tris, np.float32).reshape(-1, 3)
-
-
-_FULLSCREEN = np.array([[-1, -1, 0], [3, -1, 0], [-1, 3, 0]], np.float32)
-
-
 def draw(renderer, plan):
     """Render the plan into the renderer's target for its size and format; returns that
     framebuffer (premultiplied RGBA, GL's row order: row 0 at the bottom)."""
@@ -514,15 +497,15 @@ def draw(renderer, plan):
     defines = dict(plan.defines, OCCUPIED_RANGE=1) if occupied is not None else plan.defines
     prog = renderer.programs.get("raycast/raycast.vert", "raycast/raycast.frag", defines)
 
-    textures = {"t_volume": renderer.volume_texture(volume), "t_tf": renderer.tf_texture(plan.lut)}
+    textures = {"t_volume": volume_texture(renderer, volume), "t_tf": tf_texture(renderer, plan.lut)}
     if occupied is not None:
         textures["t_occupied_range"] = occupied
     if plan.jitter is not None:
-        textures["t_jitter"] = renderer.small_texture("jitter", plan.jitter)
+        textures["t_jitter"] = jitter_texture(renderer, plan.jitter)
     if plan.occupancy is not None:
-        textures["t_occupancy"] = renderer.occupancy_texture(volume, scene.tf, plan.occupancy)
+        textures["t_occupancy"] = occupancy_texture(renderer, volume, scene.tf, plan.occupancy)
     if plan.step_rows is not None:
-        textures["t_step_tf"] = renderer.resource("step_tf", plan.step_rows, make=lambda: _table_texture(
+        textures["t_step_tf"] = renderer.resources.for_objects("step_tf", plan.step_rows, make=lambda: _table_texture(
             renderer.ctx, plan.step_rows))
     uniforms = {**camera_uniforms(scene), **volume_uniforms(volume), **tf_uniforms(plan.lut, scene.tf),
                 "u_step": plan.step, "u_max_segments": plan.max_segments}
@@ -530,11 +513,11 @@ def draw(renderer, plan):
         uniforms["u_brick"] = float(BRICK)
     add_optional_inputs(renderer, plan, textures, uniforms)
     if plan.bricks is not None:
-        textures["t_occupancy"] = renderer.resource("preint_occupancy", plan.bricks, make=lambda: renderer.texture3d(
-            "preint_occupancy", plan.bricks, 1, "f4", linear=False))
+        textures["t_occupancy"] = renderer.resources.for_objects(
+            "preint_occupancy", plan.bricks, make=lambda: texture3d(ctx, plan.bricks, 1, "f4", linear=False))
     if plan.reach is not None:
-        textures["t_reach"] = renderer.resource("gradient_bounds", plan.reach, make=lambda: renderer.texture3d(
-            "gradient_bounds", plan.reach, 1, "f4", linear=False))
+        textures["t_reach"] = renderer.resources.for_objects(
+            "gradient_bounds", plan.reach, make=lambda: texture3d(ctx, plan.reach, 1, "f4", linear=False))
         uniforms["u_reach_block"] = float(plan.reach_block)
     if plan.refine > 1:
         # (no detail: one interval no value meets)
@@ -547,7 +530,7 @@ def draw(renderer, plan):
     if scene.mode == "isosurface":
         uniforms["u_iso"] = scene.iso_value
     if scene.optical_model == "sabella":
-        from ..reference.shading import depth_range
+        from ..model.field import depth_range
         uniforms["u_depth_range"] = depth_range(scene)
     bind(prog, textures, uniforms)
     if plan.refine > 1 and "u_detail" in prog:
@@ -555,7 +538,7 @@ def draw(renderer, plan):
 
     kind, view_proj = box_proxy(scene, grow_pixels=grow_pixels(renderer.ctx))
     prog["u_view_proj"].write(view_proj.astype("f4").tobytes())
-    vao = renderer.proxy_vao(prog, kind)
+    vao = proxy_vao(renderer, prog, kind)
     fbo = cleared_target(renderer, scene, plan.target)
     ctx.disable(ctx.BLEND | ctx.DEPTH_TEST)
     if kind == "box":
@@ -575,4 +558,23 @@ def _table_texture(ctx, rows):
     return tex
 
 
-PROXY_MESHES = {"box": _unit_cube_back_face_mesh, "fullscreen": lambda: _FULLSCREEN}
+def occupancy_texture(renderer, volume, tf, occupancy):
+    """The bricks' occupancy for the volume and its TF (``brick_occupancy``) as a
+    nearest-filtered 3-D texture, 255 where occupied; kept for the 4 most recent pairs."""
+    store = renderer.resources
+
+    def make():
+        mask = occupancy.astype(np.uint8) * 255
+        return store.made("occupancy", mask.shape, texture3d(renderer.ctx, mask, 1, "f1", linear=False))
+    return store.get("occupancy", IdentityKey(volume, tf), make, capacity=4)
+
+
+def jitter_texture(renderer, table):
+    """The jitter offsets (a 2-D float32 table) as a texture, made again only for new values."""
+    store = renderer.resources
+
+    def make():
+        tex = renderer.ctx.texture((table.shape[1], table.shape[0]), 1, table.astype("f4").tobytes(), dtype="f4")
+        tex.filter = (renderer.ctx.NEAREST, renderer.ctx.NEAREST)
+        return store.made("jitter", table.shape, tex)
+    return store.get("jitter", (table.shape, table.tobytes()), make, capacity=None)

@@ -33,12 +33,14 @@ back faces, with the slice fragments' own test, and their whole chord is integra
 in pieces of at most one slice distance (``shaders/common/slice_gap.glsl``).
 
 The stack switch: at 45 degrees two stacks are equally close and the image jumps between
-them; ``bench`` and the tests measure the jump (the README has the numbers).
+them; ``bench`` and the tests measure the jump (docs/notes/slicing.md has the numbers).
 
 Options (same names in ``dvr_gl.reference.render``)
 ---------------------------------------------------
-interpolate : int >= 0 (default 0), intermediate slices per cell.
-target : "rgba32f" (default) | "rgba16f" | "rgba8"; blending rounds in the target.
+interpolate : int >= 0 (default 0)
+    intermediate slices per cell.
+target : "rgba32f" (default) | "rgba16f" | "rgba8"
+    blending rounds in the target.
 preintegrate : classify the segment between consecutive slices with the pre-integrated
     table; the partial segments at the box entry and exit take the field at the entry or
     exit point from the two layers around it.
@@ -46,6 +48,7 @@ gradients : "on_the_fly" (default) | "texture": with ``Scene(shading=True)`` eac
     with the gradient where its sample was taken (the slice point, or the midpoint of a
     partial slab or pre-integrated segment), computed from the stack's two layers around
     each point (the trilinear field itself) or read from a gradient texture.
+
 ``step`` is not an option: passing it is an error, since the data fixes the distance.
 """
 
@@ -55,13 +58,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..util.cache import TableCache
+from ..util.cache import IdentityKey, TableCache
 from ..model.scene import Scene
 from ..model.transfer import LookupTable
 from .common import (cleared_target, add_optional_inputs, shading_defines, bind, box_depth_range, camera_uniforms, near_plane, check_flag,
                      draw_box_instances,
                      check_scene, check_target, eye_view_projection, preintegration_table, tf_uniforms,
                      volume_uniforms)
+from .gpu import stream_vao, tf_texture
 
 INFLATE = 1e-3  # slice quads are grown by this fraction of the box diagonal
 
@@ -171,7 +175,7 @@ def draw(renderer, plan):
     volume = scene.volume
     prog = renderer.programs.get("common/slice_polygons.vert", "slice2d/slice2d.frag", plan.defines)
     u, v = plan.other_axes
-    textures = {"t_stack": renderer.stack_texture(volume, plan.axis), "t_tf": renderer.tf_texture(plan.lut)}
+    textures = {"t_stack": stack_texture(renderer, volume, plan.axis), "t_tf": tf_texture(renderer, plan.lut)}
     uniforms = {**camera_uniforms(scene), **volume_uniforms(volume), **tf_uniforms(plan.lut, scene.tf),
                 "u_axes": (plan.axis, u, v), "u_slice_distance": plan.slice_distance,
                 "u_slice_count": plan.count, "u_per_cell": plan.interpolate + 1,
@@ -194,10 +198,28 @@ def draw(renderer, plan):
     ctx.blend_func = ctx.ONE, ctx.ONE_MINUS_SRC_ALPHA
     ctx.blend_equation = ctx.FUNC_ADD
     try:
-        renderer.stream_vao(prog, "slice2d", positions, indices).render(ctx.TRIANGLES)
+        stream_vao(renderer, prog, "slice2d", positions, indices).render(ctx.TRIANGLES)
         gap = renderer.programs.get("common/box_instances.vert", "slice2d/slice2d.frag", {**plan.defines, "GAP": 1})
         bind(gap, textures, uniforms)
         draw_box_instances(renderer, gap, scene, 1)
     finally:
         ctx.disable(ctx.BLEND)
     return fbo
+
+
+def stack_texture(renderer, volume, axis):
+    """The stack along ``axis`` (0 = x, 1 = y, 2 = z): a texture array with one float32
+    layer per sample plane, each layer the plane's samples with the lower of the other
+    two axes varying fastest. Made when a view first needs it; the 3 most recent kept."""
+    store = renderer.resources
+
+    def make():
+        values = volume.values(np.float32)  # (z, y, x)
+        layers = {0: values.transpose(2, 0, 1), 1: values.transpose(1, 0, 2), 2: values}[axis]
+        layers = np.ascontiguousarray(layers)  # (layer, v, u)
+        n, h, w = layers.shape
+        tex = renderer.ctx.texture_array((w, h, n), 1, layers.tobytes(), dtype="f4")
+        tex.filter = (renderer.ctx.LINEAR, renderer.ctx.LINEAR)
+        tex.repeat_x = tex.repeat_y = False
+        return store.made("stack", (axis, n, h, w), tex)
+    return store.get("stack", IdentityKey(volume, axis), make, capacity=3)

@@ -31,7 +31,7 @@ produce the same image bit for bit.
 Options (same names in ``dvr_gl.reference.render``)
 ---------------------------------------------------
 target : "rgba32f" (default) | "rgba16f" | "rgba8": blending happens in the target, so a
-    low-precision target rounds once per slice (the banding error; see the README).
+    low-precision target rounds once per slice (the banding error; see docs/notes/slicing.md).
 proxy : "cpu" (default): polygons computed on the CPU for all slices at once
     (``techniques.proxy``) and drawn in one call. "vertex": each slice is 12 vertices
     (four fan triangles over six polygon slots) placed by the vertex shader, one
@@ -60,6 +60,7 @@ from . import proxy as proxy_geometry
 from .common import (cleared_target, add_optional_inputs, shading_defines, bind, camera_uniforms, draw_box_instances, check_flag, check_scene,
                      check_step, check_target, inflated_corners, plane_projection, plane_triangles, preintegration_table,
                      tf_uniforms, volume_uniforms)
+from .gpu import empty_vao, stream_vao, tf_texture, volume_texture
 
 PROXIES = ("cpu", "vertex")
 
@@ -178,11 +179,11 @@ def draw(renderer, plan):
             bind(prog, {}, {"u_corners": [tuple(c) for c in corners], "u_normal": tuple(cam.forward),
                             **tables})
             prog["u_view_proj"].write(plane_projection(plan).astype("f4").tobytes())
-            renderer.empty_vao(prog).render(ctx.TRIANGLES, vertices=12, instances=plan.count)
+            empty_vao(renderer, prog).render(ctx.TRIANGLES, vertices=12, instances=plan.count)
         else:
             positions, slices, _ = plane_triangles(scene, plan.far_depth, plan.step, plan.count)
             prog["u_view_proj"].write(plane_projection(plan).astype("f4").tobytes())
-            renderer.stream_vao(prog, "slice3d_cpu", positions, slices).render(ctx.TRIANGLES)
+            stream_vao(renderer, prog, "slice3d_cpu", positions, slices).render(ctx.TRIANGLES)
         draw_gap(renderer, plan, (textures, uniforms))
     finally:
         ctx.disable(ctx.BLEND | ctx.CULL_FACE)
@@ -192,7 +193,7 @@ def draw(renderer, plan):
 def _inputs(renderer, plan):
     scene = plan.scene
     volume = scene.volume
-    textures = {"t_volume": renderer.volume_texture(volume), "t_tf": renderer.tf_texture(plan.lut)}
+    textures = {"t_volume": volume_texture(renderer, volume), "t_tf": tf_texture(renderer, plan.lut)}
     uniforms = {**camera_uniforms(scene), **volume_uniforms(volume), **tf_uniforms(plan.lut, scene.tf),
                 "u_far_depth": plan.far_depth, "u_step": plan.step, "u_slice_count": plan.count}
     add_optional_inputs(renderer, plan, textures, uniforms)

@@ -59,7 +59,7 @@ weight there is outside the domain, as the contract's masked cells are.
 Lighting. Each splatted sample also carries its central-difference gradient (into a
 second buffer, ``sum w g``). Interpolating those with the tent weights is exactly the
 contract's gradient (central differences of the interpolated field, clamped at the box:
-see ``reference.shading.sample_gradients``), so the lit sheets are the contract's too.
+see ``model.field.sample_gradients``), so the lit sheets are the contract's too.
 
 ``density=k`` puts the sheets ``k`` times closer (``min spacing / k`` apart); the
 samples stay the data's, since tents on a ``k`` times finer trilinear resampling of the
@@ -68,7 +68,7 @@ so resampling would only multiply the splats by ``k^3``. ``sheet_spacing`` sets 
 distance in world units instead.
 
 About the Gaussian kernel (``kernel="gaussian"``, grids and meshes; a mesh's only one)
------------------------------------------------------------------------------------
+--------------------------------------------------------------------------------------
 Pre-classified splatting (Westover 1990; elliptical kernels after Zwicker et al. 2001):
 every classified sample is a Gaussian kernel that carries its share of the extinction,
 and GL composites the kernels' footprints back to front.
@@ -108,7 +108,8 @@ volume, transfer function and density.
 
 Options (same names in ``dvr_gl.reference.render``)
 ---------------------------------------------------
-kernel : "tent" (grids' default) | "gaussian" (meshes' only kernel).
+kernel : "tent" (grids' default) | "gaussian" (meshes' only kernel)
+    the reconstruction kernel.
 density : int from 1 to 8 (default 1). Tent: sheets per data spacing (the smallest);
     Gaussian: samples per data spacing along each axis (grids only).
 sheet_spacing : tent only: the distance between sheets in world units (default: the
@@ -116,8 +117,9 @@ sheet_spacing : tent only: the distance between sheets in world units (default: 
 skip_empty : tent only (default True): leave out the samples whose cells are all
     transparent (the image is the same either way).
 radius : Gaussian only: kernel standard deviation in sample spacings, or in mean edge
-    lengths on a mesh (default 0.4: the balance of holes and blur measured in the README).
-cutoff : Gaussian only: truncation in standard deviations (default 3).
+    lengths on a mesh (default 0.4: the balance of holes and blur measured in docs/guide/splat.md).
+cutoff : Gaussian only
+    truncation in standard deviations (default 3).
 target : "rgba32f" (default) | "rgba16f" | "rgba8": blending happens in the target (the
     tent's sheet buffers are RGBA32F whatever the target).
 """
@@ -131,7 +133,7 @@ from functools import cached_property
 import numpy as np
 
 from ..util.cache import TableCache
-from ..reference.common import cell_is_valid, trilinear
+from ..model.field import cell_is_valid, trilinear
 from ..model.scene import Scene
 from ..model.transfer import LookupTable
 from . import proxy as proxy_geometry
@@ -139,6 +141,7 @@ from .common import (RepeatedIndices, SizedTarget, bind, camera_uniforms, check_
                      check_target,
                      cleared_target, data_projection, plane_projection, plane_triangles, point_shading_defines,
                      sample_term_uniforms, tf_uniforms)
+from .gpu import stream_vao, tf_texture
 from .particle_sets import extinction
 from .particles import pixels_per_unit
 
@@ -415,8 +418,8 @@ def runs_along(samples, axis):
 
 def tent_gradients(samples, volume):
     """(N, 3) float32: each splatted sample's central differences (see
-    ``reference.shading.sample_gradients``)."""
-    from ..reference.shading import sample_gradients
+    ``model.field.sample_gradients``)."""
+    from ..model.field import sample_gradients
     return sample_gradients(volume, volume.values(np.float64), at=samples.at).astype(np.float32)
 
 
@@ -577,12 +580,12 @@ def _draw_tent(renderer, plan):
     runs = sheets.runs
     splat = renderer.programs.get("splat/tent.vert", "splat/tent.frag", plan.splat_defines)
     classify = renderer.programs.get("common/slice_polygons.vert", "splat/sheet.frag", plan.defines)
-    gpu = renderer.resource("splat_tent", plan.samples, runs, plan.gradients, capacity=3,     # an axis each
-                            make=lambda: _TentTextures(ctx, plan.samples, runs, plan.gradients))
+    gpu = renderer.resources.for_objects("splat_tent", plan.samples, runs, plan.gradients, capacity=3,  # an axis each
+                                         make=lambda: _TentTextures(ctx, plan.samples, runs, plan.gradients))
     # (sum w v, sum w) and, for masked data, the non-finite weight; (sum w g) when lit
     channels = (4 if scene.volume.has_nonfinite else 2,) + ((4,) if lit else ())
-    buffers = renderer.resource("splat_sheet", *channels, capacity=2,
-                                make=lambda: SizedTarget(ctx, components=channels)).get(*scene.target_size)
+    buffers = renderer.resources.for_objects("splat_sheet", *channels, capacity=2,
+                                             make=lambda: SizedTarget(ctx, components=channels)).get(*scene.target_size)
 
     cam = scene.camera
     u, v = run_frame(cam.forward, runs.axis, cam.right)
@@ -597,7 +600,7 @@ def _draw_tent(renderer, plan):
                                  "u_section_depth": tuple(depths), "u_section_rect": [tuple(r) for r in rects],
                                  "u_margin": QUAD_MARGIN / pixels_per_unit(scene)})
     splat["u_view_proj"].write(view_proj)
-    sheet_textures = {"t_tf": renderer.tf_texture(plan.lut), "t_sheet": buffers.color_attachments[0]}
+    sheet_textures = {"t_tf": tf_texture(renderer, plan.lut), "t_sheet": buffers.color_attachments[0]}
     if lit:
         sheet_textures["t_sheet_gradient"] = buffers.color_attachments[1]
     uniforms = {**camera_uniforms(scene), **slabs, **tf_uniforms(plan.lut, scene.tf),
@@ -607,10 +610,10 @@ def _draw_tent(renderer, plan):
     bind(classify, sheet_textures, uniforms, first_unit=len(splat_textures))
     classify["u_view_proj"].write(view_proj)
     positions, index, polygon = plane_triangles(scene, sheets.far_depth, sheets.spacing, sheets.count)
-    polygons = renderer.stream_vao(classify, "splat_sheets", positions, index)
+    polygons = stream_vao(renderer, classify, "splat_sheets", positions, index)
     # two triangles per quad; quad q's corners are vertices 4q .. 4q + 3 (tent.vert)
-    quads = renderer.resource("splat_quads", make=lambda: RepeatedIndices(ctx, QUAD_TRIANGLES, minimum=1024),
-                              capacity=1).vao(
+    quads = renderer.resources.for_objects(
+        "splat_quads", make=lambda: RepeatedIndices(ctx, QUAD_TRIANGLES, minimum=1024), capacity=1).vao(
         splat, int(sheets.ranges[:, 1].max()))
 
     ctx.disable(ctx.DEPTH_TEST | ctx.CULL_FACE)
@@ -791,7 +794,7 @@ def _gaussian_plan(scene, density, radius, cutoff, target, tables):
 def splat_gradients(splats, data):
     """(N, 3) float32: the gradient at each splat's centre (a mesh's vertices: the
     volume-weighted mean of their cells')."""
-    from ..reference.shading import point_gradients
+    from ..model.field import point_gradients
     return point_gradients(data, splats.points, vertices=splats.vertices).astype(np.float32)
 
 
@@ -808,8 +811,8 @@ def _draw_gaussian(renderer, plan):
         uniforms.update(sample_term_uniforms(renderer, scene, plan.defines))
     bind(prog, {}, uniforms)
     prog["u_view_proj"].write(data_projection(scene).astype("f4").tobytes())
-    gpu = renderer.resource("splat_vbo", plan.splats, prog,
-                            make=lambda: _SplatBuffers(ctx, prog, plan.splats, plan.gradients), capacity=1)
+    gpu = renderer.resources.for_objects("splat_vbo", plan.splats, prog,
+                                         make=lambda: _SplatBuffers(ctx, prog, plan.splats, plan.gradients), capacity=1)
     vao = gpu.ordered(plan.order)
     ctx.disable(ctx.DEPTH_TEST | ctx.CULL_FACE)
     ctx.enable(ctx.BLEND)

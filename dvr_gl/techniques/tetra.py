@@ -2,7 +2,7 @@
 
 About this technique
 --------------------
-Per view, the cells are put in back-to-front order (``dvr_gl.model.mesh``: MPVO with the
+Per view, the cells are put in back-to-front order (``dvr_gl.techniques.cell_order``: MPVO with the
 per-pixel treatment of gaps in the domain, or a centroid sort) and drawn in that order,
 each as its four faces with front faces culled. A cell's back faces cover its projected
 silhouette exactly once, like the 3 or 4 triangles of Shirley and Tuchman's
@@ -33,8 +33,9 @@ Options (same names in ``dvr_gl.reference.render``)
 ---------------------------------------------------
 sort : "mpvo" (default): visibility order exact at every pixel centre, non-convex
     domains included; "centroid": cells by centroid distance from the eye (cheaper; its
-    error is measured in the README).
-target : "rgba32f" (default) | "rgba16f" | "rgba8": blending happens in the target.
+    error is measured in docs/notes/tetra_vs_vtk.md).
+target : "rgba32f" (default) | "rgba16f" | "rgba8"
+    blending happens in the target.
 """
 
 from __future__ import annotations
@@ -45,11 +46,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..util.cache import TableCache
-from ..model.mesh import LOCAL_FACES, Order, centroid_order, mpvo_order, topology, visible_cells
-from ..reference.linear_segment import SegmentKnots
+from ..model.mesh import LOCAL_FACES, cell_fields, topology
+from .cell_order import Order, centroid_order, mpvo_order, visible_cells
+from ..model.transfer import SegmentKnots
 from ..model.scene import OPTICAL_MODELS, Scene
 from .common import (sample_term_uniforms, cleared_target, RepeatedIndices, SizedTarget, bind, camera_uniforms,
                      check_scene, check_target, data_projection, grow_pixels, knot_uniforms)
+from .gpu import empty_vao
 
 MODES = ("composite", "mip", "minip", "average")
 TAKES_STEP = False
@@ -189,30 +192,6 @@ class MeshTextures:
             tex.release()
 
 
-def cell_fields(mesh):
-    """(M, 3, 4) float64: per cell (gradient of the linear field, value at the centroid),
-    (centroid, 0), positions relative to the mesh's lower corner, and (smallest, largest
-    vertex value, 0, 0): a fragment clamps its end values to that range, which its
-    float32 extrapolation can leave in a sliver (a gradient of 3e7 made values 10 data
-    units off). Zero-volume cells get a zero gradient (they are never drawn)."""
-    topo = topology(mesh)
-    lo = mesh.bounds[0]
-    p = mesh.points[topo.tets] - lo                 # (M, 4, 3)
-    s = mesh.scalars[topo.tets]
-    A = p[:, 1:] - p[:, :1]
-    b = s[:, 1:] - s[:, :1]
-    grad = np.zeros((len(p), 3))
-    ok = ~topo.flat
-    grad[ok] = np.linalg.solve(A[ok], b[ok][..., None])[..., 0]
-    out = np.zeros((len(p), 3, 4))
-    out[:, 0, :3] = grad
-    out[:, 0, 3] = s.mean(axis=1)
-    out[:, 1, :3] = p.mean(axis=1)
-    out[:, 2, 0] = topo.cell_min
-    out[:, 2, 1] = topo.cell_max
-    return out
-
-
 class _OrderTexture:
     """The per-view draw order: one int32 texel per slot, rewritten each frame, grown
     (never shrunk) as needed."""
@@ -245,30 +224,31 @@ def draw(renderer, plan):
     if plan.draw.size == 0:
         return fbo
     prog = renderer.programs.get("tetra/tetra.vert", "tetra/tetra.frag", plan.defines)
-    data = renderer.resource("tetra_mesh", mesh, make=lambda: MeshTextures(ctx, mesh), capacity=1)
-    order = renderer.resource("tetra_order", make=_OrderTexture, capacity=1).write(ctx, plan.draw)
+    data = renderer.resources.for_objects("tetra_mesh", mesh, make=lambda: MeshTextures(ctx, mesh), capacity=1)
+    order = renderer.resources.for_objects("tetra_order", make=_OrderTexture, capacity=1).write(ctx, plan.draw)
     # tetra's own depths are slot numbers; its projection only places the faces of cells
     # that reach behind the eye, clipped just in front of it
     view_proj = data_projection(scene, near=None if scene.camera.is_ortho else
                                 1e-6 * float(np.linalg.norm(mesh.extent))).astype("f4").tobytes()
 
     # the outline pass: every cell's grown outline in window coordinates (outline.frag)
-    outline = renderer.resource("tetra_outline", make=lambda: _OutlineTarget(ctx), capacity=1).get(
+    outline = renderer.resources.for_objects("tetra_outline", make=lambda: _OutlineTarget(ctx), capacity=1).get(
         int(plan.draw.size))
     outline_prog = renderer.programs.get("tetra/fullscreen.vert", "tetra/outline.frag")
     bind(outline_prog, {"t_order": order, "t_tets": data.tets, "t_points": data.points},
          {"u_target_size": scene.target_size, "u_inflate": grow_pixels(ctx), "u_slots": int(plan.draw.size)})
     outline_prog["u_view_proj"].write(view_proj)
     outline.use()
-    renderer.empty_vao(outline_prog).render(ctx.TRIANGLES, vertices=3)
+    empty_vao(renderer, outline_prog).render(ctx.TRIANGLES, vertices=3)
 
     if composite:
         color = fbo.color_attachments[0]
-        drawn = renderer.resource("tetra_depth", color, make=lambda: _DepthFramebuffer(ctx, color), capacity=2).fbo
+        drawn = renderer.resources.for_objects("tetra_depth", color, make=lambda: _DepthFramebuffer(ctx, color),
+                                               capacity=2).fbo
     else:
         # the reduction needs float precision whatever the output target is
-        drawn = reduced = renderer.resource("tetra_reduced", make=lambda: SizedTarget(ctx, depth=True),
-                                            capacity=1).get(*scene.target_size)
+        drawn = reduced = renderer.resources.for_objects("tetra_reduced", make=lambda: SizedTarget(ctx, depth=True),
+                                                         capacity=1).get(*scene.target_size)
     drawn.use()
     drawn.clear(-3.0e38 if scene.mode in ("mip", "minip") else 0.0, 0.0, 0.0, 0.0, depth=0.0)
     textures = {"t_order": order, "t_tets": data.tets, "t_points": data.points, "t_planes": data.planes,
@@ -283,7 +263,7 @@ def draw(renderer, plan):
     knot_uniforms(prog, plan.knots, plan.defines["KNOT_CAPACITY"])
     prog["u_view_proj"].write(view_proj)
     # the four faces of every drawn cell from its four vertices 4k .. 4k + 3 (tetra.vert)
-    vao = renderer.resource("tetra_faces", make=lambda: RepeatedIndices(ctx, LOCAL_FACES), capacity=1).vao(
+    vao = renderer.resources.for_objects("tetra_faces", make=lambda: RepeatedIndices(ctx, LOCAL_FACES), capacity=1).vao(
         prog, plan.draw.size)
     ctx.enable(ctx.BLEND | ctx.CULL_FACE)
     ctx.depth_func = ">"
@@ -318,7 +298,7 @@ def draw(renderer, plan):
         fbo.use()
         bind(classify, {"t_reduced": reduced.color_attachments[0]}, {"u_knot_count": plan.knots.count})
         knot_uniforms(classify, plan.knots, plan.defines["KNOT_CAPACITY"])
-        renderer.empty_vao(classify).render(ctx.TRIANGLES, vertices=3)
+        empty_vao(renderer, classify).render(ctx.TRIANGLES, vertices=3)
     return fbo
 
 
