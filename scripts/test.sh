@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Run the whole dvr_gl test suite headless. Installs the system packages the tests need
 # when they are missing (Mesa EGL/llvmpipe, OSMesa, Xvfb, Chromium; apt-get, as root), then runs
-# pytest; fails if any test fails or if no test ran.
+# pytest and builds the documentation; fails if any test fails, if no test ran, or if the
+# documentation has a warning.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -35,3 +36,14 @@ if ! grep -Eq '[0-9]+ passed' "$log"; then   # all skipped, or nothing collected
     echo "no test ran" >&2
     exit 1
 fi
+
+# The documentation, warnings as errors: the API reference from the docstrings, the
+# Markdown pages and the example gallery (examples/plot_*.py, each run headless). Built
+# afresh every time (-E, the API pages and the gallery regenerated), so that neither a
+# warning nor an example broken by a change elsewhere is hidden by an earlier build. The
+# HTML goes to docs/_build/html (ignored by git).
+echo "building the documentation"
+start=$SECONDS
+rm -rf docs/api/generated docs/auto_examples
+python -m sphinx -E -W --keep-going -q -b html docs docs/_build/html
+echo "documentation built in $((SECONDS - start)) s: docs/_build/html/index.html"

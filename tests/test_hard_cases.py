@@ -34,7 +34,8 @@ def _write_table():
     yield
     path = os.environ.get("DVR_GL_HARD_CASES")
     if path and TABLE:
-        lines = ["| case | technique | bound | measured |", "|---|---|---|---|"]
+        lines = ["# The hard cases: bound and measured error", "",
+                 "| case | technique | bound | measured |", "|---|---|---|---|"]
         lines += [f"| {c} | {t} | {b:.3g} | {m:.3g} |" for c, t, b, m in TABLE]
         with open(path, "w") as f:
             f.write("\n".join(lines) + "\n")

@@ -259,7 +259,7 @@ def test_targets_under_hundreds_of_slices(renderer, target, technique, opts):
     The reference models that rounding (``reference.common.blend_over``); GL may land on
     the other side of a rounding boundary, so they agree to one unit in the target's last
     place (at 1.0) plus the float32 bound. The banding error against exact grows with
-    the number of slices for 16- and 8-bit targets (README table)."""
+    the number of slices for 16- and 8-bit targets (table in docs/notes/slicing.md)."""
     scene = dvr_gl.Scene(VOLUME, TF, cameras(VOLUME)["perspective"], width=W, height=H)
     gl, ref, plan = render_both(renderer, scene, technique, target=target, **opts)
     assert plan.count >= 300
@@ -396,7 +396,7 @@ def test_slice2d_against_vtk_at_one_voxel(renderer):
     (interpolate=0) is already more accurate (VTK starts one step past the near plane);
     elsewhere these smooth scenes leave VTK's first-order boundary error small, while
     2-D slicing samples every spacing/|cos theta| along an oblique ray (up to 1.8 voxel
-    here), so it takes interpolate=3 to be more accurate in every scene. The README and
+    here), so it takes interpolate=3 to be more accurate in every scene. docs/notes/slicing.md and
     the closing note give the numbers."""
     pytest.importorskip("vtk", reason="VTK is an optional extra (pip install 'dvr-gl[bench]')")
     from dvr_gl.bench.vtk_peer import VTKPeer

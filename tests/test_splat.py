@@ -229,7 +229,7 @@ def test_tent_error_falls_with_density_at_second_order(name):
 
 
 def test_tent_gl_error_falls_with_density_on_the_ct_head(renderer):
-    """The issue's must-show in small (48x48; the README has it at 128x128 beside VTK):
+    """The issue's must-show in small (48x48; docs/notes/points.md has it at 128x128 beside VTK):
     density 2 at most half density 1's error against exact."""
     head = bundled.ct_head()
     scene = Scene(head, bundled.ct_head_tf(), dvr_gl.default_camera(head, azimuth=30, elevation=15), 48, 48)

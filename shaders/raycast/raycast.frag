@@ -267,7 +267,7 @@ void main() {
   #endif
     // Four segments per iteration: llvmpipe pays the loop's bookkeeping (its exit tests,
     // the breaks' masks) once per iteration (the CT head at the tolerance's one-voxel
-    // step: 47 ms one at a time, 35 four at a time; README). A segment past the last reads
+    // step: 47 ms one at a time, 35 four at a time; docs/notes/raycast.md). A segment past the last reads
     // as empty. The end
     // is still decided after each segment (compositeUntilEnd), the loop left once per
     // group: the image is the one-at-a-time loop's whatever the groups' starts, so
