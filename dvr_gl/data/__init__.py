@@ -55,8 +55,9 @@ def ct_head() -> Volume:
     """The VTK "headsq" CT head, quarter resolution: data (93, 64, 64) int16 (z, y, x),
     spacing (3.2, 3.2, 1.5), origin (0, 0, 0), values 0..3926.
 
-    The face looks towards +y and the top of the head is at z = 0, so
-    ``default_camera(ct_head(), elevation=90)`` shows the face upright.
+    The face looks towards -y and the top of the head is at z = 0: an eye on -y with -z
+    up sees the face upright (as ``dvr-gl demo`` and the gallery show it; the file names
+    no orientation, ``"RPI"`` says it to ``dvr_gl.render``).
     """
     with importlib.resources.files(__name__).joinpath(_HEADSQ_FILE).open("rb") as f:
         with np.load(f, allow_pickle=False) as npz:
