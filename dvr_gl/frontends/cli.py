@@ -27,7 +27,7 @@ import time
 from .. import formats as dvr_io
 from .inputs import PRESETS  # presets and bundled data sets are shared with the viewer and dvr_gl.render
 from .options import (MESH_TECHNIQUES, OPTION_OF_FIELD, UsageError, _check_input_options, _origin, _shape,
-                      _spacing, add_orientation_option, add_render_options, check_png, check_technique,
+                      _spacing, add_orientation_option, add_render_options, check_png, check_technique, clip_args,
                       input_is_mesh, load_input_args, resolve_tf_option, technique_options)
 
 PROG = "dvr-gl"
@@ -306,7 +306,8 @@ def cmd_render(args, out=None):
         optical["illustration"] = args.illustration
     try:
         scene = Scene(volume, tf, camera, width=width, height=height, mode=mode, iso_value=args.iso,
-                      shading=args.shading, **({"lights": tuple(args.light)} if args.light else {}), **optical)
+                      shading=args.shading, **({"lights": tuple(args.light)} if args.light else {}), **optical,
+                      **clip_args(args, volume))
     except ValueError as e:
         if not optical:
             raise

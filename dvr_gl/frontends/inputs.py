@@ -243,7 +243,7 @@ _RENDERERS = {}
 
 def render(source, *, tf=None, technique=None, size=(512, 512), azimuth=None, elevation=None, zoom=1.0, fov=30.0,
            ortho=False, mode="composite", iso=None, shading=None, lights=None, scalars=None, spacing=None,
-           orientation=None, backend="auto", **options):
+           orientation=None, clip_planes=(), crop_box=None, backend="auto", **options):
     """Render ``source`` (anything :func:`load_input` takes) in one call; returns the
     (height, width, 4) float32 premultiplied RGBA image, row 0 on top, as a
     :class:`dvr_gl.frontends.images.RenderedImage` (an ndarray that Jupyter shows as a picture).
@@ -259,7 +259,8 @@ def render(source, *, tf=None, technique=None, size=(512, 512), azimuth=None, el
     where a scan's axes point when its file does not). Composite samples are lit where the
     technique lights them (:func:`shading_for`) unless ``shading=False``; ``lights``: a
     ``dvr_gl.Light`` or a list of them (the headlight by default). One renderer per
-    backend is kept for the process, so later calls do not compile or upload again."""
+    backend is kept for the process, so later calls do not compile or upload again.
+    ``clip_planes`` and ``crop_box`` cut the data as in :class:`dvr_gl.Scene`."""
     from ..rendering.renderer import Renderer
     from ..model.scene import Scene
     data, preset = load_input(source, scalars=scalars, spacing=spacing, orientation=orientation)
@@ -279,7 +280,7 @@ def render(source, *, tf=None, technique=None, size=(512, 512), azimuth=None, el
     scene = Scene(data, tf, first_camera(data, azimuth=azimuth, elevation=elevation, zoom=zoom, fov=fov,
                                          ortho=ortho),
                   width=width, height=height, mode=mode, iso_value=iso, shading=shading,
-                  **({} if lights is None else {"lights": lights}))
+                  **({} if lights is None else {"lights": lights}), clip_planes=clip_planes, crop_box=crop_box)
     renderer = _RENDERERS.get(backend)
     if renderer is None:
         renderer = _RENDERERS[backend] = Renderer(backend=backend)

@@ -60,6 +60,42 @@ def _number(text):
     return _finite(text)
 
 
+def _six_numbers(text):
+    parts = text.split(",")
+    if len(parts) != 6:
+        raise argparse.ArgumentTypeError(f"expected six comma-separated numbers, got {text!r}")
+    return tuple(_finite(p) for p in parts)
+
+
+def _clip_plane(text):
+    """X,Y,Z,NX,NY,NZ -> (point, normal)."""
+    v = _six_numbers(text)
+    return v[:3], v[3:]
+
+
+def _crop_box(text):
+    """X0,Y0,Z0,X1,Y1,Z1 -> (lower, upper)."""
+    v = _six_numbers(text)
+    return v[:3], v[3:]
+
+
+def clip_args(args, data):
+    """The ``clip_planes`` and ``crop_box`` of a Scene from ``--clip`` and ``--crop``,
+    checked against ``data``; a bad one is a UsageError naming its option."""
+    from ..model.clipping import check_clip_planes, check_crop_box
+    planes = getattr(args, "clip", None) or ()
+    crop = getattr(args, "crop", None)
+    try:
+        check_clip_planes(planes)
+    except (TypeError, ValueError) as e:
+        raise UsageError("--clip", str(e)) from None
+    try:
+        check_crop_box(crop, data.bounds)
+    except (TypeError, ValueError) as e:
+        raise UsageError("--crop", str(e)) from None
+    return {"clip_planes": tuple(planes), "crop_box": crop}
+
+
 def whole_number(minimum):
     """An argument type: a whole number of at least ``minimum``."""
     def convert(text):
@@ -192,6 +228,11 @@ def add_render_options(r):
     r.add_argument("--mode", choices=MODES,
                    help="rendering mode (default: composite, or isosurface when --iso is given)")
     r.add_argument("--iso", type=_number, metavar="V", help="iso-value for --mode isosurface (data units)")
+    r.add_argument("--clip", type=_clip_plane, action="append", metavar="X,Y,Z,NX,NY,NZ",
+                   help="a clip plane through the world point X,Y,Z keeping the side its normal NX,NY,NZ "
+                        "points to; repeat for up to 6")
+    r.add_argument("--crop", type=_crop_box, metavar="X0,Y0,Z0,X1,Y1,Z1",
+                   help="keep only what lies inside this axis-aligned box (world corners)")
     r.add_argument("--size", type=_size, default=(512, 512), metavar="WxH",
                    help="image size in pixels (default: 512x512)")
     r.add_argument("--azimuth", type=_number, default=None, metavar="DEG",

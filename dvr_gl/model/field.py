@@ -144,3 +144,30 @@ def depth_range(scene):
     depth = (corners - cam.eye) @ cam.forward
     near = max(float(depth.min()), 0.0)
     return near, max(float(depth.max()), near + 1e-30)
+
+
+def ray_box(origins, dirs, lo, hi, inside=None):
+    """Entry and exit distances of rays against the box [lo, hi] (GLSL ``intersectBox``).
+
+    Rays start at their origin: the entry is clamped to 0. A ray parallel to a pair of
+    faces is inside the slab iff its origin is (the 0 * inf case is resolved as such;
+    ``inside``, per ray and axis, when given, says so instead: ``box_rays`` decides it in
+    world coordinates, where a ray in a face plane is exactly on it).
+    Returns (t_enter, t_exit); the ray misses where t_exit <= t_enter.
+    """
+    o = np.asarray(origins, np.float64)
+    d = np.asarray(dirs, np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = 1.0 / d
+        ta = (lo - o) * inv
+        tb = (hi - o) * inv
+    tmin = np.minimum(ta, tb)
+    tmax = np.maximum(ta, tb)
+    parallel = d == 0
+    if inside is None:
+        inside = (o >= lo) & (o <= hi)
+    tmin = np.where(parallel, np.where(inside, -np.inf, np.inf), tmin)
+    tmax = np.where(parallel, np.where(inside, np.inf, -np.inf), tmax)
+    t0 = np.maximum(tmin.max(axis=-1), 0.0)
+    t1 = tmax.min(axis=-1)
+    return t0, t1

@@ -23,6 +23,7 @@ import numpy as np
 
 from .camera import HEADLIGHT, MAX_LIGHTS, Camera, Light, anatomical_frame, default_camera
 from .checks import _finite_number
+from .clipping import check_clip_planes, check_crop_box, plane_offsets
 from .mesh import TetMesh
 from .transfer_function import TransferFunction, TransferFunction2D
 from .volume import Volume
@@ -89,11 +90,16 @@ MAX_IMAGE_SIDE = 65536  # larger than one GL target: rendered in tiles
 
 class Scene:
     """What to render: a volume (a ``Volume`` grid or a ``TetMesh``), its classification,
-    a camera, an image size and a mode."""
+    a camera, an image size and a mode.
+
+    ``clip_planes``, up to six ``(point, normal)`` pairs in world units, each keep the
+    side of their plane the normal points to; ``crop_box``, a ``(lower, upper)`` pair of
+    world corners, keeps what lies inside it (``dvr_gl.model.clipping``). The image is
+    that of the data in the kept region alone."""
 
     def __init__(self, volume, tf, camera, width=512, height=512, mode="composite",
                  iso_value=None, shading=False, phong=(0.3, 0.7, 0.2, 32.0), lights=(HEADLIGHT,),
-                 optical_model="emission_absorption", illustration=None):
+                 optical_model="emission_absorption", illustration=None, clip_planes=(), crop_box=None):
         if not isinstance(volume, (Volume, TetMesh)):
             raise TypeError(f"volume must be a dvr_gl.Volume or dvr_gl.TetMesh, got {type(volume).__name__}")
         if not isinstance(tf, (TransferFunction, TransferFunction2D)):
@@ -167,6 +173,8 @@ class Scene:
             raise TypeError(f"lights must be a dvr_gl.Light or a sequence of them, got {lights!r}") from None
         if not 1 <= len(lights) <= MAX_LIGHTS or not all(isinstance(l, Light) for l in lights):
             raise ValueError(f"lights must be 1 to {MAX_LIGHTS} dvr_gl.Light objects, got {lights!r}")
+        clip_planes = check_clip_planes(clip_planes)
+        crop_box = check_crop_box(crop_box, volume.bounds)
         self.volume = volume
         self.tf = tf              # a TransferFunction2D's envelope when given one
         self.tf_2d = tf_2d        # the TransferFunction2D, or None
@@ -180,6 +188,8 @@ class Scene:
         self.iso_value = iso_value
         self.shading = bool(shading)
         self.phong = phong
+        self.clip_planes = clip_planes   # ((point, normal), ...), world units
+        self.crop_box = crop_box         # (lower, upper) world corners, or None
 
     # The part of the image a render covers, (x, y, width, height) in pixels with y from
     # the bottom (GL window coordinates); None is the whole image. Set by the Renderer on
@@ -195,6 +205,18 @@ class Scene:
     def target_size(self):
         """(width, height) of what one render draws: the tile's, or the image's."""
         return (self.width, self.height) if self.tile is None else (self.tile[2], self.tile[3])
+
+    @property
+    def clips(self):
+        """True when clip planes or a crop box cut the data."""
+        return bool(self.clip_planes) or self.crop_box is not None
+
+    def clip_in_box(self):
+        """The clip planes as (unit normal, offset) pairs and the crop box as (lower,
+        upper), both relative to the data's lower corner (the shaders' coordinates)."""
+        lo = self.volume.bounds[0]
+        crop = None if self.crop_box is None else (self.crop_box[0] - lo, self.crop_box[1] - lo)
+        return plane_offsets(self.clip_planes, lo), crop
 
     @property
     def is_mesh(self):
@@ -223,7 +245,8 @@ class Scene:
         args = dict(volume=self.volume, tf=self.tf if self.tf_2d is None else self.tf_2d, camera=self.camera, width=self.width,
                     height=self.height, mode=self.mode, iso_value=self.iso_value,
                     shading=self.shading, phong=self.phong, lights=self.lights,
-                    optical_model=self.optical_model, illustration=dict(self.illustration))
+                    optical_model=self.optical_model, illustration=dict(self.illustration),
+                    clip_planes=self.clip_planes, crop_box=self.crop_box)
         args.update(changes)
         return Scene(**args)
 
@@ -238,6 +261,10 @@ class Scene:
             h.update(repr(tuple(light.key() for light in self.lights)).encode())
         if self.optical_model != "emission_absorption":
             h.update(self.optical_model.encode())
+        if self.clips:                # unclipped scenes keep their earlier digests (and caches)
+            planes = [[float(v) for v in (*p, *n)] for p, n in self.clip_planes]
+            crop = None if self.crop_box is None else [float(v) for v in (*self.crop_box[0], *self.crop_box[1])]
+            h.update(repr((planes, crop)).encode())
         if self.illustration:
             h.update(repr(sorted(self.illustration.items())).encode())
         if self.tf_2d is not None:

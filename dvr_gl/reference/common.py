@@ -9,35 +9,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..model.field import cell_is_valid, trilinear, world_to_index
+from ..model.clipping import clip_interval
+from ..model.field import cell_is_valid, ray_box, trilinear, world_to_index
 from ..model.transfer import correct_opacity
-
-
-def ray_box(origins, dirs, lo, hi, inside=None):
-    """Entry and exit distances of rays against the box [lo, hi] (GLSL ``intersectBox``).
-
-    Rays start at their origin: the entry is clamped to 0. A ray parallel to a pair of
-    faces is inside the slab iff its origin is (the 0 * inf case is resolved as such;
-    ``inside``, per ray and axis, when given, says so instead: ``box_rays`` decides it in
-    world coordinates, where a ray in a face plane is exactly on it).
-    Returns (t_enter, t_exit); the ray misses where t_exit <= t_enter.
-    """
-    o = np.asarray(origins, np.float64)
-    d = np.asarray(dirs, np.float64)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        inv = 1.0 / d
-        ta = (lo - o) * inv
-        tb = (hi - o) * inv
-    tmin = np.minimum(ta, tb)
-    tmax = np.maximum(ta, tb)
-    parallel = d == 0
-    if inside is None:
-        inside = (o >= lo) & (o <= hi)
-    tmin = np.where(parallel, np.where(inside, -np.inf, np.inf), tmin)
-    tmax = np.where(parallel, np.where(inside, np.inf, -np.inf), tmax)
-    t0 = np.maximum(tmin.max(axis=-1), 0.0)
-    t1 = tmax.min(axis=-1)
-    return t0, t1
 
 
 def box_rays(scene):
@@ -51,6 +25,9 @@ def box_rays(scene):
     # which can round an origin on the upper face to just outside it
     world = origins.reshape(-1, 3)
     t0, t1 = ray_box(o, d, np.zeros(3), scene.volume.extent, inside=(world >= lo) & (world <= hi))
+    if scene.clips:
+        planes, crop = scene.clip_in_box()
+        t0, t1 = clip_interval(o, d, t0, t1, planes, crop)
     return o, d, t0, t1
 
 

@@ -36,6 +36,8 @@ segments (a non-convex domain) add nothing. mip/minip take the segment ends, ave
 integrates the linear pieces over the union's length, isosurface solves the first
 crossing on a linear piece with the grid's rules for entry side and gaps, and shades with
 the hit tet's own (constant) gradient, threshold ``1e-6 * (data range) / cell_size``.
+Clip planes and a crop box cut each segment to its ray's kept interval (the values at a
+cut end interpolated linearly, empty segments dropped) before any mode sees it.
 Measured against a Richardson-extrapolated fine integration on single tets and split
 cubes: below 1e-11; against the tetra reference's closed-form segment integral on the
 blunt fin: 1.5e-11.
@@ -59,6 +61,7 @@ import os
 
 import numpy as np
 
+from ..model.clipping import clip_interval, plane_offsets
 from ..model.scene import Scene
 from .common import ray_box
 from ..model.field import gradient, gradient_epsilon
@@ -899,6 +902,8 @@ def _render(scene):
     d = dirs.reshape(-1, 3)
     lo, hi = scene.volume.bounds
     t0, t1 = ray_box(o, d, lo, hi)
+    if scene.clips:                   # the contract over the kept part of the domain only
+        t0, t1 = clip_interval(o, d, t0, t1, plane_offsets(scene.clip_planes), scene.crop_box)
     out = np.zeros((W * H, 4))
     hit = np.flatnonzero(t1 > t0)
     chunks = range(0, hit.size, _CHUNK)
@@ -942,9 +947,11 @@ def _progress(steps, scene):
 
 
 def _render_mesh(scene):
-    from .mesh_rays import MeshRays, union_segments
+    from .mesh_rays import MeshRays, clip_segments, kept_intervals, union_segments
     W, H = scene.width, scene.height
     rays = MeshRays(scene)
+    if scene.clips:                   # each ray's kept interval, world coordinates
+        kept = kept_intervals(scene)
     ex = _MeshExact(scene)
     out = np.zeros((W * H, 4))
     mode = scene.mode
@@ -955,6 +962,8 @@ def _render_mesh(scene):
         if progress is not None:
             progress.advance(f"exact image {W}x{H}")
         seg = union_segments(rays.segments(r0, r1))
+        if scene.clips:               # the contract over the kept part of the domain only
+            seg = clip_segments(seg, *kept)
         if seg["pixel"].size == 0:
             continue
         pix, seg["ray"] = np.unique(seg["pixel"], return_inverse=True)

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["ray_tet_segments", "union_segments", "MeshRays"]
+__all__ = ["ray_tet_segments", "union_segments", "clip_segments", "kept_intervals", "MeshRays"]
 
 _CANDIDATES = 1 << 18      # (tet, pixel) pairs clipped at a time (bounds memory)
 _MARGIN = 1e-6             # pixels added around each projected bounding box
@@ -230,3 +230,42 @@ def union_segments(seg):
         f = (start[clipped] - t0[clipped]) / (t1[clipped] - t0[clipped])
         s_start[clipped] = s0[clipped] + (s1[clipped] - s0[clipped]) * f
     return dict(pixel=pix[keep], tet=cell[keep], t0=start[keep], t1=t1[keep], s0=s_start[keep], s1=s1[keep])
+
+
+def kept_intervals(scene, box_coordinates=False):
+    """Per pixel, the part ``[lo, hi]`` of its ray (``scene.camera.rays``, t >= 0) that the
+    scene's clip planes and crop box keep (``model.clipping.clip_interval``; the whole
+    ray for a scene that does not clip). In world coordinates, or with
+    ``box_coordinates`` relative to the mesh's lower corner, as the shaders compute it
+    (the same t either way: only the origins move)."""
+    from ..model.clipping import clip_interval, plane_offsets
+    origins, dirs = scene.camera.rays(scene.width, scene.height)
+    o, d = origins.reshape(-1, 3), dirs.reshape(-1, 3)
+    lo_t, hi_t = np.zeros(len(o)), np.full(len(o), np.inf)
+    if not scene.clips:
+        return lo_t, hi_t
+    if box_coordinates:
+        planes, crop = scene.clip_in_box()
+        o = o - scene.volume.bounds[0]
+    else:
+        planes, crop = plane_offsets(scene.clip_planes), scene.crop_box
+    return clip_interval(o, d, lo_t, hi_t, planes, crop)
+
+
+def clip_segments(seg, lo_t, hi_t):
+    """The segments cut to their ray's kept interval ``[lo_t[pixel], hi_t[pixel]]``
+    (``kept_intervals``): the field's values at a cut end interpolated linearly (the
+    field is linear along a segment), ends that are not cut left as they are, empty
+    segments dropped. Keeps the segments' order."""
+    pix = seg["pixel"]
+    t0, t1, s0, s1 = (seg[k] for k in ("t0", "t1", "s0", "s1"))
+    a = np.maximum(t0, lo_t[pix])
+    b = np.minimum(t1, hi_t[pix])
+    keep = np.flatnonzero(b > a)
+    t0, t1, s0, s1, a, b = t0[keep], t1[keep], s0[keep], s1[keep], a[keep], b[keep]
+    rate = (s1 - s0) / (t1 - t0)
+    out = {k: v[keep] for k, v in seg.items()}
+    out["t0"], out["t1"] = a, b
+    out["s0"] = np.where(a > t0, s0 + (a - t0) * rate, s0)
+    out["s1"] = np.where(b < t1, s0 + (b - t0) * rate, s1)
+    return out

@@ -4,14 +4,16 @@ depth test), its colour (the exact TF's, stored with the particle), opaque; the 
 averaged.
 
 As GL does with points, a particle whose centre lies outside the view's clip volume is
-not drawn (``sprites``).
+not drawn (``sprites``). With clip planes or a crop box, a particle counts on a pixel's ray
+where its centre's projection on the ray lies in the ray's kept part (``sprites.kept_ranges``,
+the fragment shader's test); spheres that miss the kept region are dropped beforehand.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from .sprites import sprite_pixel_pairs
+from .sprites import kept_ranges, sprite_pixel_pairs
 
 
 def render_plan(plan, lut_exact=False):
@@ -34,6 +36,7 @@ def first_hits(scene, radius, points, colors, gradients=None):
     p = np.asarray(points, np.float64)
     kept, origins, dirs, chunks = sprite_pixel_pairs(scene, p, radius)
     p, colors = p[kept], np.asarray(colors, np.float64)[kept]
+    keep0, keep1 = kept_ranges(scene, origins, dirs)
     best = np.full(W * H, np.inf)
     owner = np.full(W * H, -1, np.int64)
     for ids, pixel in chunks:
@@ -42,7 +45,7 @@ def first_hits(scene, radius, points, colors, gradients=None):
         off = v - t[:, None] * dirs[pixel]
         miss = radius * radius - np.einsum("ij,ij->i", off, off)
         half_chord = np.sqrt(np.maximum(miss, 0.0))
-        hit = (miss >= 0) & (t + half_chord > 0)
+        hit = (miss >= 0) & (t + half_chord > 0) & (t >= keep0[pixel]) & (t <= keep1[pixel])
         t_hit = np.maximum(t - half_chord, 0.0)
         pixel, t_hit, who = pixel[hit], t_hit[hit], ids[hit]
         order = np.lexsort((t_hit, pixel))

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..techniques.slice2d import across_stack
 from .common import blend_over, box_rays, gap_pass, classified_segment, classifier
 from ..model.field import cell_is_valid, trilinear, world_to_index
 from .shading import ray_lighting
@@ -36,10 +37,28 @@ def render_plan(plan, lut_exact=False):
     def within(p, axis):
         return np.where(d[:, axis] == 0, in_world[:, axis], (p[:, axis] >= 0) & (p[:, axis] <= extent[axis]))
 
+    planes, crop = scene.clip_in_box()
+
+    def clip_keeps(j, p):
+        """GLSL clipKeeps: slice j's points p kept by the plan's slice range along the
+        axis, the crop box across it and the planes not parallel to the slices."""
+        first, last = plan.kept_slices
+        ok = (j >= first) & (j <= last)
+        if crop is not None:
+            ok &= (p[:, u] >= crop[0][u]) & (p[:, u] <= crop[1][u]) & (p[:, v] >= crop[0][v]) & (p[:, v] <= crop[1][v])
+        for normal, offset in planes:
+            if not across_stack(normal, w):
+                ok &= p @ normal - offset >= 0
+        return ok
+
     def inside(j, t):
         p = o + t[:, None] * d
         with np.errstate(invalid="ignore"):
             ok = (j >= 0) & (j < plan.count) & (t * cos_theta >= plan.min_depth) & moving
+            if scene.clips:   # the point on the slice's own plane must be kept
+                q = p.copy()
+                q[:, w] = j * plan.slice_distance
+                ok &= clip_keeps(j, q)
             ok &= within(p, u) & within(p, v)
         return ok
 

@@ -2,7 +2,8 @@
 blending order as ``shaders/slice3d/slice3d.frag``, in float64 (per-target rounding of
 the blending as ``common.blend_over`` models it). The polygons only decide which pixels
 a slice may cover; the shader's per-fragment test decides which it does, so the
-reference applies that test to every pixel (and the gap pass's test after the slices)."""
+reference applies that test to every pixel (and the gap pass's test after the slices).
+With clip planes or a crop box the rays' intervals (``box_rays``) are the kept ones."""
 
 from __future__ import annotations
 

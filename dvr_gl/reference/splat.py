@@ -12,7 +12,10 @@ along every pixel-centre ray near it (float64, the same closed form as the shade
 composited with the over operator. The over operator is associative, so the per-pixel
 sequence is composited at once: with the splats of a pixel listed front to back, each
 one's colour is weighted by the product of ``1 - alpha`` of those in front (a segmented
-cumulative sum of ``log(1 - alpha)``).
+cumulative sum of ``log(1 - alpha)``). With clip planes or a crop box, each kernel's
+optical depth along a ray is that of its part in the ray's kept range (``clip_fraction``,
+the shader's closed form with the same erf), and kernels whose cutoff sphere misses the
+kept region are dropped (``sprites``).
 """
 
 from __future__ import annotations
@@ -21,7 +24,24 @@ import numpy as np
 
 from .common import blend_under, box_rays, classifier, plane_inside, segment_of, slab_segment
 from .particles import lit_colors
-from .sprites import sprite_pixel_pairs
+from .sprites import kept_ranges, sprite_pixel_pairs
+
+
+def erf_as(x):
+    """erf to 1.5e-7 (Abramowitz and Stegun 7.1.26): GLSL ``erfAS`` of shaders/splat/splat.frag."""
+    x = np.asarray(x, np.float64)
+    t = 1.0 / (1.0 + 0.3275911 * np.abs(x))
+    poly = t * (0.254829592 + t * (-0.284496736 + t * (1.421413741 + t * (-1.453152027 + t * 1.061405429))))
+    with np.errstate(invalid="ignore"):
+        return np.sign(x) * (1.0 - poly * np.exp(-x * x))
+
+
+def clip_fraction(a, b, t0, t1):
+    """The share of a kernel's integral along a ray that lies in the ray's kept range
+    [t0, t1]: along the ray the kernel is a 1D Gaussian in t with mean -b / a and standard
+    deviation 1 / sqrt(a) (``a``, ``b`` as in the shader)."""
+    centre, k = -b / a, np.sqrt(0.5 * a)
+    return 0.5 * (erf_as((t1 - centre) * k) - erf_as((t0 - centre) * k))
 
 
 def render_plan(plan, lut_exact=False):
@@ -113,11 +133,12 @@ def _render_tent(plan, lut_exact):
     return acc.reshape(H, W, 4)
 
 
-def _gaussian_pairs(plan):
+def _gaussian_pairs(plan, clip_terms=False):
     """Every (pixel, splat) pair near each other, a chunk at a time: the pixels, the
     splats' draw ranks, the rays' directions, their distance from each centre at closest
     approach in standard deviations squared (m2), whether the centre is ahead (b < 0) and
-    the kernel's opacity along the ray (the shader's closed form)."""
+    the kernel's opacity along the ray (the shader's closed form); with ``clip_terms`` (a
+    clipped scene) also a dict of what the kept range's share depends on."""
     order = plan.order
     centres = plan.splats.points[order].astype(np.float64)
     samples = plan.splats.samples[order].astype(np.float64)
@@ -125,6 +146,9 @@ def _gaussian_pairs(plan):
     inv_var = 1.0 / plan.sigma ** 2
     u = plan.kernel_uniforms()
     rank, origins, dirs, chunks = sprite_pixel_pairs(plan.scene, centres, u["u_reach"] * scales)
+    clips = plan.scene.clips
+    if clips:
+        keep0, keep1 = kept_ranges(plan.scene, origins, dirs)
     for ids, pixel in chunks:
         q = origins[pixel] - centres[rank[ids]]
         d = dirs[pixel]
@@ -135,7 +159,19 @@ def _gaussian_pairs(plan):
         off = q - (b / a)[:, None] * d
         m2 = np.einsum("ij,ij->i", off * off, iv)
         od = samples[rank[ids], 3] * u["u_norm"] / scale ** 3 / np.sqrt(a) * np.exp(-0.5 * m2)
-        yield pixel, rank[ids], d, m2, b < 0, -np.expm1(-od)
+        ahead = b < 0
+        terms = None
+        if clips:
+            ahead &= keep1[pixel] > keep0[pixel]
+            share = clip_fraction(a, b, keep0[pixel], keep1[pixel])
+            if clip_terms:
+                terms = dict(depth=od, share=share, a=a, b=b, t0=keep0[pixel], t1=keep1[pixel],
+                             origin=np.linalg.norm(origins[pixel], axis=1), q=np.linalg.norm(q, axis=1), dirs=d)
+            od = od * share
+        if clip_terms:
+            yield pixel, rank[ids], d, m2, ahead, -np.expm1(-od), terms
+        else:
+            yield pixel, rank[ids], d, m2, ahead, -np.expm1(-od)
 
 
 def cutoff_ambiguity(plan, band):
@@ -148,6 +184,44 @@ def cutoff_ambiguity(plan, band):
     for pixel, _, _, m2, ahead, alpha in _gaussian_pairs(plan):
         near = ahead & (np.abs(np.sqrt(m2) - plan.cutoff) <= band)
         np.add.at(out, pixel[near], alpha[near])
+    return out.reshape(scene.height, scene.width)
+
+
+def clip_rounding(plan, eps=2.0 ** -23):
+    """(H, W): per pixel a bound on how much float32 rounding of the clipped share moves
+    the Gaussian splats' opacities (zero unclipped). A splat's opacity is ``1 - exp(-D f)``
+    with ``f = (erf(z1) - erf(z0)) / 2``, ``z = (t_end - c) sqrt(a / 2)``, ``c = -b / a`` its
+    centre along the ray and ``t_end`` the kept range's ends; so it moves by at most
+    ``D exp(-D f) |df|``, ``|df| <= sum over the ends of exp(-z^2) |dz| / sqrt(pi)``. The
+    centre along the ray rounds by ``8 eps |q|`` (as the cutoff's band: ``|q|`` the eye's
+    distance from the centre); an end, where the ray meets a plane or a crop face, by
+    ``8 eps (|o| + t + max |offset|)`` across that surface, so ``/ g`` along the ray, ``g``
+    the smallest non-zero ``|n . d|`` over the planes and the crop box's axes; and the erf's own
+    float32 evaluation by ``8 eps`` each. Over compositing, a pixel moves by at most the
+    sum over its splats."""
+    scene = plan.scene
+    out = np.zeros(scene.width * scene.height)
+    if not scene.clips:
+        return out.reshape(scene.height, scene.width)
+    planes, crop = scene.clip_in_box()
+    normals = [np.asarray(n, np.float64) for n, _ in planes] + ([] if crop is None else list(np.eye(3)))
+    offsets = [abs(o) for _, o in planes] + ([] if crop is None else [float(np.abs(np.concatenate(crop)).max())])
+    reach = max(offsets)
+    for pixel, _, _, _, ahead, _, t in _gaussian_pairs(plan, clip_terms=True):
+        k = np.sqrt(0.5 * t["a"])
+        centre = -t["b"] / t["a"]
+        cosines = np.abs(np.stack([t["dirs"] @ n for n in normals]))
+        g = np.min(np.where(cosines > 0, cosines, np.inf), axis=0)      # a parallel surface ends no ray
+        moved = np.zeros(pixel.size)
+        for end in (t["t0"], t["t1"]):
+            finite = np.isfinite(end)
+            z = np.where(finite, (np.where(finite, end, 0.0) - centre) * k, np.inf)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                dt = 8 * eps * (t["origin"] + np.abs(np.where(finite, end, 0.0)) + reach) / g
+            dz = k * (dt + 8 * eps * t["q"]) + 8 * eps
+            moved += np.where(finite, np.exp(-np.minimum(z * z, 700.0)) * dz / np.sqrt(np.pi), 0.0)
+        sensitivity = t["depth"] * np.exp(-t["depth"] * t["share"]) * moved
+        np.add.at(out, pixel[ahead], sensitivity[ahead])
     return out.reshape(scene.height, scene.width)
 
 

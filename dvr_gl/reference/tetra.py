@@ -7,6 +7,10 @@ What the GL path leaves to rasterisation is decided here as GL decides it: a pix
 ray lies in a face shared by two cells is covered once (GL's rule gives such a pixel to
 one of the two triangles; both give the same segment), so overlapping coverage of a ray
 is counted once.
+
+Clip planes and a crop box: each (cell, pixel) segment is cut to the pixel ray's kept
+interval (box coordinates, as the shader's ``clipRange``), its end values interpolated
+linearly, before anything else; empty ones are dropped, as the shader discards them.
 """
 
 from __future__ import annotations
@@ -15,7 +19,7 @@ import numpy as np
 
 from .common import blend_over
 from .linear_segment import linear_segment
-from .mesh_rays import ray_tet_segments, union_segments
+from .mesh_rays import clip_segments, kept_intervals, ray_tet_segments, union_segments
 from .shading import sample_terms
 
 
@@ -27,7 +31,10 @@ def render_plan(plan, lut_exact=False):
     out = np.zeros((H * W, 4))
     if plan.draw.size == 0:
         return out.reshape(H, W, 4)
-    seg = union_segments(ray_tet_segments(scene, tets=plan.draw))
+    seg = ray_tet_segments(scene, tets=plan.draw)
+    if scene.clips:     # each fragment's segment cut to its ray's kept interval (tetra.frag)
+        seg = clip_segments(seg, *kept_intervals(scene, box_coordinates=True))
+    seg = union_segments(seg)
     if scene.mode != "composite":
         return _reduce(scene, seg, out).reshape(H, W, 4)
     rank = np.full(len(scene.volume.tets), -1, np.int64)

@@ -19,6 +19,7 @@ TARGETS = {"rgba32f": "f4", "rgba16f": "f2", "rgba8": "f1"}
 SHADING_TECHNIQUES = ("raycast", "slice3d", "slice2d")   # those with every sample term and optical model
 LIGHTING_TECHNIQUES = SHADING_TECHNIQUES + ("tetra", "particles", "splat")   # those that light composite samples
 GRADIENTS = ("on_the_fly", "texture")
+CLIPPING_TECHNIQUES = ("raycast", "tetra", "slice2d", "slice3d", "particles", "splat")   # those that clip to Scene.clip_planes and crop_box
 
 
 def check_scene(scene, technique, modes=None, data="volume"):
@@ -59,6 +60,9 @@ def check_scene(scene, technique, modes=None, data="volume"):
     if modes is not None and scene.mode not in modes:
         raise ValueError(f"{technique} renders mode {' or '.join(repr(m) for m in modes)}, "
                          f"got mode {scene.mode!r}")
+    if scene.clips and technique not in CLIPPING_TECHNIQUES:
+        raise ValueError(f"{technique} does not clip yet: clip_planes and crop_box are rendered by "
+                         f"{', '.join(CLIPPING_TECHNIQUES)}")
 
 
 def check_target(target):
@@ -102,6 +106,28 @@ def volume_uniforms(volume):
     """Uniforms of shaders/common/sampling.glsl and the box."""
     return {"u_extent": tuple(volume.extent), "u_dims": tuple(float(n) for n in volume.dims),
             "u_spacing": tuple(volume.spacing)}
+
+
+def clip_defines(scene):
+    """Switches of shaders/common/clip.glsl for the scene's clip planes and crop box."""
+    defines = {}
+    if scene.clip_planes:
+        defines["N_CLIP_PLANES"] = len(scene.clip_planes)
+    if scene.crop_box is not None:
+        defines["CROP_BOX"] = 1
+    return defines
+
+
+def clip_uniforms(scene):
+    """Uniforms of shaders/common/clip.glsl, in box coordinates (float32 bytes for the
+    plane array, which ``bind`` writes whole)."""
+    planes, crop = scene.clip_in_box()
+    uniforms = {}
+    if planes:
+        uniforms["u_clip_planes"] = np.array([(*n, d) for n, d in planes], np.float32).tobytes()
+    if crop is not None:
+        uniforms["u_crop_lo"], uniforms["u_crop_hi"] = tuple(crop[0]), tuple(crop[1])
+    return uniforms
 
 
 def tf_uniforms(lut, tf):
@@ -249,7 +275,10 @@ def bind(prog, textures, uniforms, first_unit=0):
             prog[name].value = unit
     for name, value in uniforms.items():
         if name in prog:
-            prog[name].value = value
+            if isinstance(value, bytes):       # a uniform array, written whole
+                prog[name].write(value)
+            else:
+                prog[name].value = value
 
 
 def eye_view_projection(scene, near, far):

@@ -27,6 +27,25 @@ target : "rgba32f" (default) | "rgba16f" | "rgba8"
 Particles are drawn as point sprites; a particle whose centre lies outside the view's
 clip volume is not drawn (GL clips points by their centre).
 
+Clip planes and crop boxes (``Scene(clip_planes=..., crop_box=...)``). The particle sets
+are the data's whatever the clip (moving a plane makes none). A particle counts on a
+pixel's ray where its centre's projection on the ray, ``t = (centre - origin) . dir``,
+lies in the part of the ray the planes and the crop box keep (``clipRange`` from the ray's
+start, tested per fragment); spheres that miss the kept region altogether are dropped in
+the vertex shader (``insideClip`` with the radius as margin: such a sphere's projections
+all lie outside, so no pixel changes). Why by projection: the derivation of
+``particle_sets`` counts, along a stretch ``dt`` of the ray, the particles whose
+projection falls in it, so keeping those of the kept interval makes each ray see the
+Poisson process of intensity ``tau / A`` over its clipped interval, and the expected
+image is the contract over the clipped domain. The cut adds no bias: what remains is the
+technique's noise and its ``r^2`` bias. Keeping particles by their centre instead would
+blur every cut by a disc (a ray passing within ``r`` outside a crop face meets the
+particles just inside it, and one inside misses those just outside): measured on a
+cropped constant box (tests/test_clip_points.py), a bias of 0.055 RMSE that no repetition
+count removes; the per-ray rule's error there is the estimator's noise alone. On the CT
+head at 48x48 and one set, the error against the clipped exact image is 0.61 to 0.87 of
+the unclipped one.
+
 Lighting (``Scene(shading=True)``): each particle carries the gradient at its centre (a
 mesh's particle, its cell's), computed once per set; a pixel's colour is the particle's
 colour lit with that gradient along the pixel's own ray (``shadeBlinnPhong``), so the
@@ -46,8 +65,8 @@ from ..util.cache import TableCache
 from ..gl.context import current
 from ..util.progress import Progress
 from ..model.scene import Scene
-from .common import (cleared_target, SizedTarget, bind, camera_uniforms, check_scene, check_target, data_projection,
-                     point_shading_defines, sample_term_uniforms)
+from .common import (cleared_target, SizedTarget, bind, camera_uniforms, check_scene, check_target, clip_defines,
+                     clip_uniforms, data_projection, point_shading_defines, sample_term_uniforms)
 from .gpu import empty_vao
 
 POINT_SPRITES = True  # drawn as GL points, which are clipped by their centres (see Renderer.render)
@@ -120,6 +139,7 @@ def make_plan(scene, step=None, *, repetitions=1, seed=0, radius=None, sampler="
     timing = {"generate": time.perf_counter() - t0} if missing else {}
     defines = {"ORTHO": 1} if scene.camera.is_ortho else {}
     defines.update(point_shading_defines(scene))
+    defines.update(clip_defines(scene))     # particles whose centre is clipped away are not drawn
     gradients = None
     if scene.shading:      # once per set, with the set
         gradients = [tables.get("particle_gradients", s, data, make=pbvr.particle_gradients) for s in sets]
@@ -162,7 +182,7 @@ def draw(renderer, plan):
     prog = renderer.programs.get("particles/particles.vert", "particles/particles.frag", plan.defines)
     average = renderer.programs.get("tetra/fullscreen.vert", "particles/average.frag")
     uniforms = {**camera_uniforms(scene), "u_radius": plan.radius, "u_pixels_per_unit": pixels_per_unit(scene),
-                "u_inv_far": 1.0 / far_distance(scene), "u_size_step": point_size_step(ctx)}
+                "u_inv_far": 1.0 / far_distance(scene), "u_size_step": point_size_step(ctx), **clip_uniforms(scene)}
     if scene.shading:
         uniforms.update(sample_term_uniforms(renderer, scene, plan.defines))
     bind(prog, {}, uniforms)

@@ -97,7 +97,7 @@ from ..gl.resources import texture3d
 from ..model.scene import Scene
 from ..model.transfer import LookupTable
 from .common import (cleared_target, add_optional_inputs, bind, box_proxy, box_view, camera_uniforms, check_flag,
-                     check_scene, grow_pixels, shading_defines,
+                     check_scene, clip_defines, clip_uniforms, grow_pixels, shading_defines,
                      check_step, check_target, preintegration_applies, preintegration_table, tf_uniforms, volume_uniforms)
 from .gpu import proxy_vao, target_fbo, tf_texture, volume_texture
 
@@ -216,6 +216,7 @@ def make_plan(scene, step=None, *, target="rgba32f", jitter_seed=None, ert_trans
             # a compile-time count: a uniform one cost the spike's frame 10 % (docs/notes/raycast.md)
             defines["DETAIL_COUNT"] = max(len(detail), 1)
     defines.update(shading_defines(scene, gradients))
+    defines.update(clip_defines(scene))
     step_rows = None
     if check_flag("step_table", step_table) and uses_step_table(scene, preint):
         step_rows = tables.get("step_table", lut, step / scene.tf.unit_distance,
@@ -508,7 +509,7 @@ def draw(renderer, plan):
         textures["t_step_tf"] = renderer.resources.for_objects("step_tf", plan.step_rows, make=lambda: _table_texture(
             renderer.ctx, plan.step_rows))
     uniforms = {**camera_uniforms(scene), **volume_uniforms(volume), **tf_uniforms(plan.lut, scene.tf),
-                "u_step": plan.step, "u_max_segments": plan.max_segments}
+                **clip_uniforms(scene), "u_step": plan.step, "u_max_segments": plan.max_segments}
     if plan.occupancy is not None or plan.bricks is not None:
         uniforms["u_brick"] = float(BRICK)
     add_optional_inputs(renderer, plan, textures, uniforms)

@@ -32,6 +32,15 @@ silhouette, or a ray parallel to the slices) are found by a second pass over the
 back faces, with the slice fragments' own test, and their whole chord is integrated there
 in pieces of at most one slice distance (``shaders/common/slice_gap.glsl``).
 
+Clip planes and a crop box (``Scene(clip_planes=..., crop_box=...)``): each fragment's
+slab is cut to its ray's kept interval (``clipRange`` of the box range), and a slice whose
+point the clip cuts away is no slice for that ray, so its neighbours' slabs (and the gap
+pass, for a kept part that holds no slice) run to the kept interval's ends. Along the stack
+axis the cut is decided once per slice, in the plan (``kept_slice_range``: the crop box's
+faces across the axis and the planes parallel to the slices): a face on a slice plane then
+keeps that slice for every pixel, as the box's own faces do, and only the slices it keeps
+are drawn.
+
 The stack switch: at 45 degrees two stacks are equally close and the image jumps between
 them; ``bench`` and the tests measure the jump (docs/notes/slicing.md has the numbers).
 
@@ -63,7 +72,8 @@ from ..model.scene import Scene
 from ..model.transfer import LookupTable
 from .common import (cleared_target, add_optional_inputs, shading_defines, bind, box_depth_range, camera_uniforms, near_plane, check_flag,
                      draw_box_instances,
-                     check_scene, check_target, eye_view_projection, preintegration_table, tf_uniforms,
+                     check_scene, check_target, clip_defines, clip_uniforms, eye_view_projection,
+                     preintegration_table, tf_uniforms,
                      volume_uniforms)
 from .gpu import stream_vao, tf_texture
 
@@ -84,6 +94,7 @@ class Slice2DPlan:
     order: np.ndarray              # slice indices in drawing order, far to near
     min_depth: float               # slice points nearer the eye than this are not drawn
     target: str = "rgba32f"
+    kept_slices: tuple = None      # (first, last) slice the clip keeps along the axis; None: unclipped
     preint: object = None
     defines: dict = field(default_factory=dict)
 
@@ -135,9 +146,39 @@ def make_plan(scene, step=None, *, target="rgba32f", interpolate=0, preintegrate
     if volume.has_nonfinite:
         defines["MASK_NONFINITE"] = 1
     defines.update(shading_defines(scene, gradients))
+    defines.update(clip_defines(scene))
+    kept_slices = None
+    if scene.clips:
+        kept_slices = kept_slice_range(scene, axis, z)
+        order = order[(order >= kept_slices[0]) & (order <= kept_slices[1])]
     return Slice2DPlan(scene=scene, lut=lut, axis=axis, interpolate=int(interpolate),
                        slice_distance=slice_distance, count=count, order=order, min_depth=min_depth,
-                       target=target, preint=preint, defines=defines)
+                       target=target, preint=preint, defines=defines, kept_slices=kept_slices)
+
+
+def across_stack(normal, axis):
+    """Whether a clip plane's unit ``normal`` is perpendicular to the slices of the stack
+    along ``axis``, as the shader sees it (its other two components 0 in float32): such a
+    plane keeps or cuts whole slices, decided in the plan (``kept_slice_range``)."""
+    u, v = [a for a in range(3) if a != axis]
+    return np.float32(normal[u]) == 0 and np.float32(normal[v]) == 0
+
+
+def kept_slice_range(scene, axis, w):
+    """(first, last) index of the slices at box coordinates ``w`` along ``axis`` that the
+    crop box's faces across the axis and the clip planes parallel to the slices keep
+    (first > last: none). Decided once, in float64, for the GL path and the twin alike: a
+    face on a slice plane keeps that slice for every pixel (the shader tests each
+    fragment against the other clips only)."""
+    planes, crop = scene.clip_in_box()
+    kept = np.ones(len(w), bool)
+    if crop is not None:
+        kept &= (w >= crop[0][axis]) & (w <= crop[1][axis])
+    for normal, offset in planes:
+        if across_stack(normal, axis):
+            kept &= normal[axis] * w - offset >= 0
+    index = np.flatnonzero(kept)
+    return (int(index[0]), int(index[-1])) if index.size else (0, -1)
 
 
 def _far_plane(scene):
@@ -177,9 +218,11 @@ def draw(renderer, plan):
     u, v = plan.other_axes
     textures = {"t_stack": stack_texture(renderer, volume, plan.axis), "t_tf": tf_texture(renderer, plan.lut)}
     uniforms = {**camera_uniforms(scene), **volume_uniforms(volume), **tf_uniforms(plan.lut, scene.tf),
-                "u_axes": (plan.axis, u, v), "u_slice_distance": plan.slice_distance,
+                **clip_uniforms(scene), "u_axes": (plan.axis, u, v), "u_slice_distance": plan.slice_distance,
                 "u_slice_count": plan.count, "u_per_cell": plan.interpolate + 1,
                 "u_min_depth": plan.min_depth}
+    if plan.kept_slices is not None:
+        uniforms["u_kept_slices"] = plan.kept_slices
     add_optional_inputs(renderer, plan, textures, uniforms)
     bind(prog, textures, uniforms)
 

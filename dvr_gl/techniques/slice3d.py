@@ -23,6 +23,11 @@ the silhouette, through edges and corners) is found by a second pass over the bo
 faces, with the slice fragments' own test, and its whole chord is integrated there
 (``shaders/common/slice_gap.glsl``).
 
+Clip planes and a crop box (``Scene(clip_planes=..., crop_box=...)``) cut each ray's box
+range to its kept interval (``clipRange``) before anything else: the planes are tested
+against that interval, the partial slabs run to its ends, and a ray whose kept part holds
+no plane goes through the gap pass.
+
 Coverage is decided by that per-fragment test, never by rasterisation: the polygons are
 cut from a box inflated by a small margin and fragments outside the true box are
 discarded. So the CPU and vertex-shader proxies, whose vertices round differently,
@@ -58,6 +63,7 @@ from ..model.scene import Scene
 from ..model.transfer import LookupTable
 from . import proxy as proxy_geometry
 from .common import (cleared_target, add_optional_inputs, shading_defines, bind, camera_uniforms, draw_box_instances, check_flag, check_scene,
+                     clip_defines, clip_uniforms,
                      check_step, check_target, inflated_corners, plane_projection, plane_triangles, preintegration_table,
                      tf_uniforms, volume_uniforms)
 from .gpu import empty_vao, stream_vao, tf_texture, volume_texture
@@ -124,6 +130,7 @@ def make_plan(scene, step=None, *, target="rgba32f", proxy="cpu", shells=False, 
     if volume.has_nonfinite:
         defines["MASK_NONFINITE"] = 1
     defines.update(shading_defines(scene, gradients))
+    defines.update(clip_defines(scene))
     return Slice3DPlan(scene=scene, step=step, lut=lut, target=target, proxy=proxy, shells=shells,
                        preint=preint, far_depth=float(far_depth), count=int(count), defines=defines)
 
@@ -195,7 +202,7 @@ def _inputs(renderer, plan):
     volume = scene.volume
     textures = {"t_volume": volume_texture(renderer, volume), "t_tf": tf_texture(renderer, plan.lut)}
     uniforms = {**camera_uniforms(scene), **volume_uniforms(volume), **tf_uniforms(plan.lut, scene.tf),
-                "u_far_depth": plan.far_depth, "u_step": plan.step, "u_slice_count": plan.count}
+                **clip_uniforms(scene), "u_far_depth": plan.far_depth, "u_step": plan.step, "u_slice_count": plan.count}
     add_optional_inputs(renderer, plan, textures, uniforms)
     return textures, uniforms
 

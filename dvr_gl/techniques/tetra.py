@@ -29,6 +29,14 @@ per view), every fragment of a cell carries its draw slot's depth, and the depth
 keeps one fragment per cell and pixel (``tetra.vert`` has the details, and how a ray
 lying exactly in a face's plane is given to one cell).
 
+Clip planes and a crop box (``Scene.clip_planes``, ``crop_box``). Each fragment cuts its
+cell's segment to the part of the pixel's ray the clip keeps (``clipRange`` in
+shaders/common/clip.glsl; the kept region is convex, so that part is one interval), takes
+the field's values at the cut ends, and is discarded where nothing is left. The cells
+whose four points all lie outside one plane or beyond one face of the crop box are left
+out of the draw (found once per mesh and clip, ``cells_kept``); the rest keep their
+order, which stays back to front. Unclipped scenes compile none of this.
+
 Options (same names in ``dvr_gl.reference.render``)
 ---------------------------------------------------
 sort : "mpvo" (default): visibility order exact at every pixel centre, non-convex
@@ -51,7 +59,8 @@ from .cell_order import Order, centroid_order, mpvo_order, visible_cells
 from ..model.transfer import SegmentKnots
 from ..model.scene import OPTICAL_MODELS, Scene
 from .common import (sample_term_uniforms, cleared_target, RepeatedIndices, SizedTarget, bind, camera_uniforms,
-                     check_scene, check_target, data_projection, grow_pixels, knot_uniforms)
+                     check_scene, check_target, clip_defines, clip_uniforms, data_projection, grow_pixels,
+                     knot_uniforms)
 from .gpu import empty_vao
 
 MODES = ("composite", "mip", "minip", "average")
@@ -87,6 +96,44 @@ def reaches_behind_eye(scene, cells):
     return depth[topology(mesh).tets[cells]].min(axis=1) <= near
 
 
+def cells_kept(scene, cells):
+    """Per cell of ``cells``: can any of it be kept by the scene's clip planes and crop
+    box? False for a cell whose four points all lie strictly outside one plane's
+    half-space or beyond one face of the crop box (float64, world units): the kept region
+    is convex, so every ray's kept interval misses such a cell, and leaving it out of the
+    draw changes no pixel. All True when the scene does not clip."""
+    keep = np.ones(len(cells), bool)
+    if not scene.clips or len(cells) == 0:
+        return keep
+    mesh = scene.volume
+    corners = mesh.points[topology(mesh).tets[cells]]           # (m, 4, 3)
+    for point, normal in scene.clip_planes:
+        keep &= ((corners - point) @ normal >= 0).any(axis=1)
+    if scene.crop_box is not None:
+        lower, upper = scene.crop_box
+        keep &= ~(corners < lower).all(axis=1).any(axis=1)
+        keep &= ~(corners > upper).all(axis=1).any(axis=1)
+    return keep
+
+
+def _clip_key(scene):
+    """The scene's clip as a string (a TableCache key compares strings by value)."""
+    planes = [[float(v) for v in (*p, *n)] for p, n in scene.clip_planes]
+    crop = None if scene.crop_box is None else [[float(v) for v in c] for c in scene.crop_box]
+    return repr((planes, crop))
+
+
+def _drop_clipped(scene, cells, tables):
+    """``cells`` less those the clip keeps nothing of (``cells_kept``), their order kept:
+    the restriction of a back-to-front order to a subset is still one. Which cells the
+    clip keeps is found once per mesh and clip."""
+    if not scene.clips:
+        return cells
+    keep = tables.get(f"tetra_kept:{_clip_key(scene)}", scene.volume,
+                      make=lambda mesh: cells_kept(scene, np.arange(mesh.n_tets)))
+    return cells[keep[cells]]
+
+
 def make_plan(scene, step=None, *, sort="mpvo", target="rgba32f", tables=None):
     """Validate the options and decide what the scene needs. ``tables`` keeps the
     visible cells (per TF) and the order (per view) between frames."""
@@ -103,8 +150,9 @@ def make_plan(scene, step=None, *, sort="mpvo", target="rgba32f", tables=None):
         # order-independent reductions of the field (not of the TF): every cell with a
         # volume counts, and nothing is sorted
         cells = np.flatnonzero(~topology(mesh).flat).astype(np.int32)
+        cells = _drop_clipped(scene, cells, tables)
         defines = {"KNOT_CAPACITY": knot_capacity(knots.count), f"MODE_{scene.mode.upper()}": 1,
-                   "MODE_COMPOSITE": 0}
+                   "MODE_COMPOSITE": 0, **clip_defines(scene)}
         if scene.camera.is_ortho:
             defines["ORTHO"] = 1
         return TetraPlan(scene=scene, knots=knots, visible=cells, order=Order(cells, 0, 0), draw=cells,
@@ -124,7 +172,8 @@ def make_plan(scene, step=None, *, sort="mpvo", target="rgba32f", tables=None):
     result = tables.get(f"tetra_order:{sort}:{scene.width}x{scene.height}", mesh, tf, scene.camera, make=order)
     flat = topology(mesh).flat
     draw = result.cells[~flat[result.cells]].astype(np.int32)
-    defines = {"KNOT_CAPACITY": knot_capacity(knots.count)}
+    draw = _drop_clipped(scene, draw, tables)
+    defines = {"KNOT_CAPACITY": knot_capacity(knots.count), **clip_defines(scene)}
     if scene.camera.is_ortho:
         defines["ORTHO"] = 1
     if scene.optical_model != "emission_absorption":     # absorption (1) or emission (2) only
@@ -256,7 +305,7 @@ def draw(renderer, plan):
                 "t_outline23": outline.color_attachments[1]}
     uniforms = {**camera_uniforms(scene), "u_knot_count": plan.knots.count, "u_inv_unit": plan.knots.inv_unit,
                 "u_target_size": scene.target_size,
-                "u_centre": data.centre}
+                "u_centre": data.centre, **clip_uniforms(scene)}
     if scene.shading or scene.illustration:
         uniforms.update(sample_term_uniforms(renderer, scene, plan.defines))
     bind(prog, textures, uniforms)

@@ -13,6 +13,7 @@
 #endif
 
 #include "common/camera_ray.glsl"
+#include "common/clip.glsl"
 #if SHADING
 #include "common/shading.glsl"
 flat in vec3 v_gradient;
@@ -36,6 +37,12 @@ void main() {
     if (miss < 0.0) discard;
     float half_chord = sqrt(miss);
     if (t + half_chord <= 0.0) discard;       // the sphere is behind the ray's start
+#if N_CLIP_PLANES > 0 || CROP_BOX
+    // clipped: the particle counts on this ray where its centre's projection on the ray
+    // lies in the ray's kept part (techniques/particles.py)
+    vec2 kept = clipRange(origin, dir, vec2(0.0, 1.0 / 0.0));
+    if (t < kept.x || t > kept.y) discard;
+#endif
     gl_FragDepth = clamp(max(t - half_chord, 0.0) * u_inv_far, 0.0, 1.0);
 #if SHADING
     frag_color = vec4(shadeBlinnPhong(v_color, v_gradient, dir), 1.0);   // lit along this pixel's ray

@@ -4,6 +4,7 @@
 #version 330 core
 
 #include "common/sprite.glsl"
+#include "common/clip.glsl"
 
 #ifndef SHADING
 #define SHADING 0
@@ -32,6 +33,9 @@ void main() {
     // instead. The rule is made explicit: such a point is moved beyond the far plane.
     vec4 clip = u_view_proj * vec4(a_position, 1.0);
     bool inside = all(lessThanEqual(abs(clip.xyz), vec3(clip.w)));
+#if N_CLIP_PLANES > 0 || CROP_BOX
+    inside = inside && insideClip(a_position, u_radius);   // a sphere that misses the kept region
+#endif
     gl_Position = inside ? clip : vec4(0.0, 0.0, 2.0, 1.0);
     gl_PointSize = spriteSize(a_position, u_radius, u_eye, u_forward, u_pixels_per_unit) + u_size_step;
     v_center = a_position;

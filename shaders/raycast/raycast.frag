@@ -45,6 +45,7 @@
 
 #include "common/camera_ray.glsl"
 #include "common/ray_box.glsl"
+#include "common/clip.glsl"
 #include "common/sampling.glsl"
 #include "common/classification.glsl"
 #include "common/compositing.glsl"
@@ -198,7 +199,7 @@ void compositePartial(vec3 origin, vec3 dir, float a, float b, inout vec3 color,
 void main() {
     vec3 origin, dir;
     pixelRay(origin, dir);
-    vec2 range = intersectBox(origin, dir, vec3(0.0), u_extent);
+    vec2 range = clipRange(origin, dir, intersectBox(origin, dir, vec3(0.0), u_extent));
     f_color = vec4(0.0);
     if (range.y <= range.x) return;
     float t0 = range.x, t1 = range.y;

@@ -18,6 +18,7 @@
 
 #include "common/camera_ray.glsl"
 #include "common/ray_box.glsl"
+#include "common/clip.glsl"
 #include "common/sampling.glsl"
 #include "common/classification.glsl"
 #if PREINTEGRATE
@@ -42,11 +43,41 @@ float sliceT(int j, vec3 origin, vec3 dir) {
     return (float(j) * u_slice_distance - origin[u_axes.x]) / dir[u_axes.x];
 }
 
-// Does slice j exist, with its point on this ray inside its rectangle and drawn?
+#if N_CLIP_PLANES > 0 || CROP_BOX
+uniform ivec2 u_kept_slices;     // the first and last slice the clip keeps along the axis
+
+// Do the clip planes and the crop box keep slice j's point p? Along the stack axis the
+// plan decided it (u_kept_slices: the crop box's faces across the axis, the planes
+// parallel to the slices), so that a face on a slice plane keeps or cuts the slice for
+// every pixel alike, as the box's own faces do; here the rest, closed as clipRange keeps.
+bool clipKeeps(int j, vec3 p) {
+    if (j < u_kept_slices.x || j > u_kept_slices.y) return false;
+#if CROP_BOX
+    float pu = p[u_axes.y], pv = p[u_axes.z];
+    if (pu < u_crop_lo[u_axes.y] || pu > u_crop_hi[u_axes.y] || pv < u_crop_lo[u_axes.z] || pv > u_crop_hi[u_axes.z])
+        return false;
+#endif
+#if N_CLIP_PLANES > 0
+    for (int i = 0; i < N_CLIP_PLANES; ++i) {
+        vec3 n = u_clip_planes[i].xyz;
+        if (n[u_axes.y] == 0.0 && n[u_axes.z] == 0.0) continue;   // parallel to the slices: in u_kept_slices
+        if (dot(n, p) - u_clip_planes[i].w < 0.0) return false;
+    }
+#endif
+    return true;
+}
+#endif
+
+// Does slice j exist, with its point on this ray inside its rectangle and drawn? With
+// clip planes or a crop box, the point (on the slice's own plane) must also be kept.
 bool sliceInside(int j, float t, vec3 origin, vec3 dir, float cos_theta) {
     if (j < 0 || j >= u_slice_count || t * cos_theta < u_min_depth) return false;
     vec3 p = origin + t * dir;
     float pu = p[u_axes.y], pv = p[u_axes.z];
+#if N_CLIP_PLANES > 0 || CROP_BOX
+    p[u_axes.x] = float(j) * u_slice_distance;
+    if (!clipKeeps(j, p)) return false;
+#endif
     return pu >= 0.0 && pu <= u_extent[u_axes.y] && pv >= 0.0 && pv <= u_extent[u_axes.z];
 }
 
@@ -104,7 +135,7 @@ void main() {
     vec3 origin, dir;
     pixelRay(origin, dir);
     if (dir[u_axes.x] == 0.0) discard;  // parallel to the slices
-    vec2 range = intersectBox(origin, dir, vec3(0.0), u_extent);
+    vec2 range = clipRange(origin, dir, intersectBox(origin, dir, vec3(0.0), u_extent));
     float cos_theta = dot(dir, u_forward);
     int j = v_slice;
     float t = sliceT(j, origin, dir);
@@ -168,7 +199,7 @@ vec4 segmentColor(vec3 origin, vec3 dir, float a, float b) {
 void main() {
     vec3 origin, dir;
     pixelRay(origin, dir);
-    vec2 range = intersectBox(origin, dir, vec3(0.0), u_extent);
+    vec2 range = clipRange(origin, dir, intersectBox(origin, dir, vec3(0.0), u_extent));
     if (!(range.y > range.x)) discard;
     float cos_theta = dot(dir, u_forward);
     // the slice planes the chord spans along the stack axis; more than two between its

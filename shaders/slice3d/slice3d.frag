@@ -18,6 +18,7 @@
 
 #include "common/camera_ray.glsl"
 #include "common/ray_box.glsl"
+#include "common/clip.glsl"
 #include "common/slabs.glsl"
 #include "common/sampling.glsl"
 #include "common/classification.glsl"
@@ -59,7 +60,7 @@ vec4 segmentColor(vec3 origin, vec3 dir, float a, float b) {
 void main() {
     vec3 origin, dir;
     pixelRay(origin, dir);
-    vec2 range = intersectBox(origin, dir, vec3(0.0), u_extent);
+    vec2 range = clipRange(origin, dir, intersectBox(origin, dir, vec3(0.0), u_extent));
     float cos_theta = dot(dir, u_forward);
     int k = v_slice;
     float t = sliceT(k, cos_theta);
@@ -91,7 +92,7 @@ void main() {
 void main() {
     vec3 origin, dir;
     pixelRay(origin, dir);
-    vec2 range = intersectBox(origin, dir, vec3(0.0), u_extent);
+    vec2 range = clipRange(origin, dir, intersectBox(origin, dir, vec3(0.0), u_extent));
     if (!(range.y > range.x)) discard;
     float cos_theta = dot(dir, u_forward);
 #if SHELLS

@@ -6,6 +6,7 @@
 
 #include "common/camera_ray.glsl"
 #include "common/ray_box.glsl"
+#include "common/clip.glsl"
 #include "common/slabs.glsl"
 #include "common/classification.glsl"
 
@@ -30,7 +31,8 @@ out vec4 f_color;
 void main() {
     vec3 origin, dir;
     pixelRay(origin, dir);
-    vec2 range = intersectBox(origin, dir, vec3(0.0), u_extent);
+    // the sheets stand for the kept part of the ray only (clip planes, crop box)
+    vec2 range = clipRange(origin, dir, intersectBox(origin, dir, vec3(0.0), u_extent));
     float cos_theta = dot(dir, u_forward);
     int k = v_slice;
     float t = sliceT(k, cos_theta);

@@ -16,6 +16,7 @@
 
 #include "common/camera_ray.glsl"
 #include "common/compositing.glsl"
+#include "common/clip.glsl"
 #if SHADING
 #include "common/shading.glsl"
 flat in vec3 v_gradient;
@@ -31,6 +32,15 @@ uniform float u_norm;          // 1 / (2 pi sqrt(det) (1 - exp(-cutoff^2 / 2))),
 
 out vec4 frag_color;
 
+#if N_CLIP_PLANES > 0 || CROP_BOX
+// erf(x) to 1.5e-7 (Abramowitz and Stegun 7.1.26; NumPy twin: reference.splat.erf_as)
+float erfAS(float x) {
+    float t = 1.0 / (1.0 + 0.3275911 * abs(x));
+    float poly = t * (0.254829592 + t * (-0.284496736 + t * (1.421413741 + t * (-1.453152027 + t * 1.061405429))));
+    return sign(x) * (1.0 - poly * exp(-x * x));
+}
+#endif
+
 void main() {
     vec3 origin, dir;
     pixelRay(origin, dir);
@@ -45,6 +55,15 @@ void main() {
     float m2 = dot(off * off, inv_var);
     if (m2 > u_cutoff2) discard;
     float depth = v_sample.a * u_norm / (v_scale * v_scale * v_scale) * inversesqrt(a) * exp(-0.5 * m2);
+#if N_CLIP_PLANES > 0 || CROP_BOX
+    // clipped: the kernel along the ray is a 1D Gaussian in t (mean -b / a, standard
+    // deviation 1 / sqrt(a)); only its part in the ray's kept range counts
+    vec2 kept = clipRange(origin, dir, vec2(0.0, 1.0 / 0.0));
+    if (kept.y <= kept.x) discard;
+    float centre_t = -b / a;
+    float k = sqrt(0.5 * a);
+    depth *= 0.5 * (erfAS((kept.y - centre_t) * k) - erfAS((kept.x - centre_t) * k));
+#endif
     float alpha = -expm1Accurate(-depth);
 #if SHADING
     frag_color = vec4(shadeBlinnPhong(v_sample.rgb, v_gradient, dir) * alpha, alpha);   // lit along this ray

@@ -5,6 +5,7 @@
 #version 330 core
 
 #include "common/sprite.glsl"
+#include "common/clip.glsl"
 
 #ifndef SHADING
 #define SHADING 0
@@ -31,6 +32,10 @@ out vec3 g_gradient;
 
 void main() {
     gl_Position = u_view_proj * vec4(a_position, 1.0);
+#if N_CLIP_PLANES > 0 || CROP_BOX
+    // a kernel whose cutoff sphere misses the kept region: splat.geom drops it
+    if (!insideClip(a_position, u_reach * a_scale)) gl_Position = vec4(0.0, 0.0, 2.0, 1.0);
+#endif
     g_size = spriteSize(a_position, u_reach * a_scale, u_eye, u_forward, u_pixels_per_unit);
     g_center = a_position;
     g_sample = a_sample;

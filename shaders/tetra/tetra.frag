@@ -32,6 +32,8 @@
 
 #include "common/camera_ray.glsl"
 #include "common/linear_segment.glsl"
+// N_CLIP_PLANES, CROP_BOX (common/clip.glsl): both 0 unless the scene clips
+#include "common/clip.glsl"
 #if SAMPLE_TERMS
 #define DEPTH_CUE_ALONG_SEGMENT 1   // the cue varies along a segment: integrated with it
 #include "common/shading.glsl"
@@ -86,6 +88,14 @@ void main() {
     float t_in = max(max(entries.x, entries.y), max(entries.z, entries.w));   // >= 0: rays start here
     float t_out = min(min(exits.x, exits.y), min(exits.z, exits.w));
     if (t_out <= t_in) discard;
+#if N_CLIP_PLANES > 0 || CROP_BOX
+    // the segment cut to the part of the pixel's ray the clip planes and crop box keep;
+    // the end values below follow from the cut ends (the field is linear along it)
+    vec2 kept = clipRange(origin, dir, vec2(t_in, t_out));
+    t_in = kept.x;
+    t_out = kept.y;
+    if (t_out <= t_in) discard;      // nothing of this cell is kept on this ray
+#endif
     float rate = dot(v_field.xyz, dir);
     float s_at_start = v_field.w + dot(v_field.xyz, offset);
     // a linear field takes its extremes at the vertices: float32 extrapolation from the

@@ -67,6 +67,7 @@ class Viewer:
         self.illustration = tuple(settings.illustration)
         self.lights = settings.lights
         self.step = settings.step          # None: the technique's default
+        self.clip_planes, self.crop_box = settings.clip_planes, settings.crop_box
         self.tolerance = settings.tolerance  # raycast: an RMSE the full frames are rendered to
         self.options = dict(settings.options)  # technique options: command line, then keys
         self.technique = settings.technique
@@ -188,7 +189,8 @@ class Viewer:
         return Scene(self.volume, tf or self.tf, self.orbit.camera(), width=width, height=height,
                      mode=self.mode, iso_value=self.iso if self.mode == "isosurface" else None,
                      shading=self.lit, **({"lights": self.lights} if self.lights else {}),
-                     optical_model=self.optical_model, illustration=self.illustration)
+                     optical_model=self.optical_model, illustration=self.illustration,
+                     clip_planes=self.clip_planes, crop_box=self.crop_box)
 
     @property
     def lit(self):

@@ -62,6 +62,8 @@ class Settings:
     illustration: tuple = ()             # Ebert-Rheingans terms by name (key i cycles them)
     lights: tuple | None = None          # dvr_gl.Light objects; None: the headlight
     tolerance: float | None = None       # raycast: full frames at the step for this RMSE
+    clip_planes: tuple = ()              # ((point, normal), ...), world units
+    crop_box: tuple | None = None        # (lower, upper) world corners
 
 
 def build_parser():
@@ -97,7 +99,7 @@ def build_parser():
 def settings_from_args(args) -> Settings:
     """Check the options and load the input (no window yet): a bad file fails here."""
     from ..options import UsageError, check_png, check_technique, load_input_args, resolve_tf_option, \
-        technique_options
+        technique_options, clip_args
 
     screenshot, option = (args.screenshot, "--screenshot") if args.screenshot else (args.out, "--out")
     if screenshot:
@@ -128,4 +130,5 @@ def settings_from_args(args) -> Settings:
                     options=options, shading=getattr(args, "shading", None),
                     lights=tuple(args.light) if getattr(args, "light", None) else None,
                     optical_model=getattr(args, "optical_model", None) or "emission_absorption",
-                    illustration=tuple(getattr(args, "illustration", None) or ()), tolerance=tolerance)
+                    illustration=tuple(getattr(args, "illustration", None) or ()), tolerance=tolerance,
+                    **clip_args(args, volume))
