@@ -9,14 +9,16 @@
 - ``camera``: :class:`Camera`, :class:`Light`, default views; ``scene``: :class:`Scene`;
 - ``field``: the field between samples (interpolation, gradients), read alike by the
   techniques, their NumPy twins and the exact integrator;
+- ``clipping``: clip planes and crop boxes; ``geometry``: opaque :class:`Surface` meshes;
 - ``cell_split``: hexahedra, wedges and pyramids into tetrahedra; ``checks``: argument checks.
 """
 
 from .camera import Camera, Light, anatomical_frame, default_camera
+from .geometry import Surface
 from .mesh import TetMesh
 from .scene import Scene
 from .transfer_function import TransferFunction, TransferFunction2D
 from .volume import Volume
 
-__all__ = ["Camera", "Light", "Scene", "TetMesh", "TransferFunction", "TransferFunction2D", "Volume",
+__all__ = ["Camera", "Light", "Scene", "Surface", "TetMesh", "TransferFunction", "TransferFunction2D", "Volume",
            "anatomical_frame", "default_camera"]

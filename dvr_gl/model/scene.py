@@ -24,6 +24,7 @@ import numpy as np
 from .camera import HEADLIGHT, MAX_LIGHTS, Camera, Light, anatomical_frame, default_camera
 from .checks import _finite_number
 from .clipping import check_clip_planes, check_crop_box, plane_offsets
+from .geometry import check_geometry
 from .mesh import TetMesh
 from .transfer_function import TransferFunction, TransferFunction2D
 from .volume import Volume
@@ -95,11 +96,14 @@ class Scene:
     ``clip_planes``, up to six ``(point, normal)`` pairs in world units, each keep the
     side of their plane the normal points to; ``crop_box``, a ``(lower, upper)`` pair of
     world corners, keeps what lies inside it (``dvr_gl.model.clipping``). The image is
-    that of the data in the kept region alone."""
+    that of the data in the kept region alone. ``geometry``: opaque
+    :class:`dvr_gl.Surface` triangle meshes inside or around the data, which end the rays
+    that meet them (``dvr_gl.model.geometry``)."""
 
     def __init__(self, volume, tf, camera, width=512, height=512, mode="composite",
                  iso_value=None, shading=False, phong=(0.3, 0.7, 0.2, 32.0), lights=(HEADLIGHT,),
-                 optical_model="emission_absorption", illustration=None, clip_planes=(), crop_box=None):
+                 optical_model="emission_absorption", illustration=None, clip_planes=(), crop_box=None,
+                 geometry=()):
         if not isinstance(volume, (Volume, TetMesh)):
             raise TypeError(f"volume must be a dvr_gl.Volume or dvr_gl.TetMesh, got {type(volume).__name__}")
         if not isinstance(tf, (TransferFunction, TransferFunction2D)):
@@ -173,6 +177,7 @@ class Scene:
             raise TypeError(f"lights must be a dvr_gl.Light or a sequence of them, got {lights!r}") from None
         if not 1 <= len(lights) <= MAX_LIGHTS or not all(isinstance(l, Light) for l in lights):
             raise ValueError(f"lights must be 1 to {MAX_LIGHTS} dvr_gl.Light objects, got {lights!r}")
+        geometry = check_geometry(geometry)
         clip_planes = check_clip_planes(clip_planes)
         crop_box = check_crop_box(crop_box, volume.bounds)
         self.volume = volume
@@ -190,6 +195,7 @@ class Scene:
         self.phong = phong
         self.clip_planes = clip_planes   # ((point, normal), ...), world units
         self.crop_box = crop_box         # (lower, upper) world corners, or None
+        self.geometry = geometry         # opaque Surfaces that end rays
 
     # The part of the image a render covers, (x, y, width, height) in pixels with y from
     # the bottom (GL window coordinates); None is the whole image. Set by the Renderer on
@@ -246,7 +252,7 @@ class Scene:
                     height=self.height, mode=self.mode, iso_value=self.iso_value,
                     shading=self.shading, phong=self.phong, lights=self.lights,
                     optical_model=self.optical_model, illustration=dict(self.illustration),
-                    clip_planes=self.clip_planes, crop_box=self.crop_box)
+                    clip_planes=self.clip_planes, crop_box=self.crop_box, geometry=self.geometry)
         args.update(changes)
         return Scene(**args)
 
@@ -265,6 +271,8 @@ class Scene:
             planes = [[float(v) for v in (*p, *n)] for p, n in self.clip_planes]
             crop = None if self.crop_box is None else [float(v) for v in (*self.crop_box[0], *self.crop_box[1])]
             h.update(repr((planes, crop)).encode())
+        if self.geometry:
+            h.update(repr([s.digest() for s in self.geometry]).encode())
         if self.illustration:
             h.update(repr(sorted(self.illustration.items())).encode())
         if self.tf_2d is not None:

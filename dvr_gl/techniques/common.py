@@ -20,6 +20,7 @@ SHADING_TECHNIQUES = ("raycast", "slice3d", "slice2d")   # those with every samp
 LIGHTING_TECHNIQUES = SHADING_TECHNIQUES + ("tetra", "particles", "splat")   # those that light composite samples
 GRADIENTS = ("on_the_fly", "texture")
 CLIPPING_TECHNIQUES = ("raycast", "tetra", "slice2d", "slice3d", "particles", "splat")   # those that clip to Scene.clip_planes and crop_box
+GEOMETRY_TECHNIQUES = ()   # those that end rays at Scene.geometry (opaque surfaces)
 
 
 def check_scene(scene, technique, modes=None, data="volume"):
@@ -60,6 +61,9 @@ def check_scene(scene, technique, modes=None, data="volume"):
     if modes is not None and scene.mode not in modes:
         raise ValueError(f"{technique} renders mode {' or '.join(repr(m) for m in modes)}, "
                          f"got mode {scene.mode!r}")
+    if scene.geometry and technique not in GEOMETRY_TECHNIQUES:
+        raise ValueError(f"{technique} does not draw geometry yet: a scene with geometry is rendered by "
+                         f"{', '.join(GEOMETRY_TECHNIQUES) or 'no technique yet'}")
     if scene.clips and technique not in CLIPPING_TECHNIQUES:
         raise ValueError(f"{technique} does not clip yet: clip_planes and crop_box are rendered by "
                          f"{', '.join(CLIPPING_TECHNIQUES)}")
