@@ -1114,3 +1114,35 @@ def test_tolerance_refines_to_the_chosen_step_and_keys_change_it(open_viewer, re
     press(v, "-")
     press(v, "-")
     assert v.tolerance == pytest.approx(4e-3) and v.render_arguments()[2] > step
+
+
+# ----------------------------------------------------------------------------- clipping
+
+def test_clip_plane_keys_and_drag_match_the_headless_cut(open_viewer, renderer, tmp_path):
+    from dvr_gl.frontends.viewer import MOD_ALT
+    v = head_viewer(open_viewer, "--screenshot", str(tmp_path / "c.png"))
+    assert v.clip_planes == ()
+    press(v, "k")                                   # a plane through the centre, facing the eye
+    (point, normal), = v.clip_planes
+    np.testing.assert_allclose(point, np.mean(v.volume.bounds, axis=0))
+    np.testing.assert_allclose(normal, v.orbit.camera().forward)
+    before = point.copy()
+    drag(v, (80, 60), (80, 30), mods=MOD_ALT)       # up: along the normal, the eye unmoved
+    (moved, _), = v.clip_planes
+    assert np.dot(moved - before, normal) > 0
+    np.testing.assert_allclose(v.orbit.camera().eye, first_camera(v.volume, azimuth=0, elevation=90).eye)
+    v.refine()
+    press(v, "s")
+    scene = v.render_arguments()[0]
+    assert len(scene.clip_planes) == 1
+    assert_matches_headless(v, renderer, png(tmp_path / "c.png"))
+    press(v, "k")                                   # off, and on again where it was
+    assert v.clip_planes == ()
+    press(v, "k")
+    np.testing.assert_allclose(v.clip_planes[0][0], moved)
+
+
+def test_clip_option_reaches_the_viewer(open_viewer):
+    v = head_viewer(open_viewer, "--clip", "100,100,70,1,0,0", "--crop", "0,0,0,150,150,100")
+    scene = v.render_arguments()[0]
+    assert len(scene.clip_planes) == 1 and scene.crop_box is not None

@@ -5,10 +5,18 @@
   and raw samples. :mod:`dvr_gl.formats.volumes` describes each format, what the file
   supplies (spacing, origin, anatomical orientation, modality) and how samples are
   widened to the types a Volume holds.
+- :func:`load_series` reads volumes over time into a
+  :class:`dvr_gl.model.series.VolumeSeries`: a list of files or a glob pattern, or one
+  4-D array (see :mod:`dvr_gl.formats.series` for where each format keeps time).
 - :func:`load_mesh` reads an unstructured mesh into a :class:`dvr_gl.TetMesh` (``.npz``,
   ``.vtu``, legacy ``.vtk`` and what meshio reads); :func:`is_mesh_file` tells a mesh from
   a volume, :func:`point_arrays` lists a mesh file's point arrays. See
   :mod:`dvr_gl.formats.meshes`.
+- :func:`load_surface` reads a triangle mesh file (what meshio reads; quadrilaterals
+  split) into a :class:`dvr_gl.Surface` to draw inside a volume (``Scene.geometry``).
+- :func:`save_surface` writes a :class:`dvr_gl.Surface` (an isosurface, say) to ``.ply``,
+  ``.obj``, ``.stl``, ``.vtk`` or ``.vtu`` through meshio, atomically (see
+  :mod:`dvr_gl.formats.surfaces`).
 - :func:`save_png` writes a premultiplied float RGBA image (conventions section 7)
   atomically; :func:`to_png_array` is the 8-bit array it writes.
 - :func:`parse_size`, :func:`parse_triplet` and :func:`parse_orientation` parse
@@ -40,7 +48,10 @@ from .images import save_png, to_png_array
 from .meshes import AMBIGUOUS_MESH_EXTENSIONS, is_mesh_file, load_mesh, point_arrays
 from .parsing import RAW_DTYPES, _parse_dtype, parse_orientation, parse_size, parse_triplet
 from .raw import raw_name_layout
+from .surfaces import SURFACE_FORMATS, load_surface, save_surface
 from .volumes import SUPPORTED_VOLUMES, load_volume
+from .series import is_series_file, load_series, load_series_file, natural_key, series_paths
 
 __all__ = ["InputError", "MissingFileError", "load_volume", "load_mesh", "is_mesh_file", "point_arrays",
-           "save_png", "to_png_array", "parse_size", "parse_triplet", "parse_orientation", "RAW_DTYPES"]
+           "save_png", "to_png_array", "load_surface", "save_surface", "parse_size", "parse_triplet", "parse_orientation", "RAW_DTYPES",
+           "load_series", "is_series_file"]

@@ -1,4 +1,4 @@
-"""The ``dvr-gl`` command line: ``info``, ``render``, ``demo``, ``bench`` and ``view``.
+"""The ``dvr-gl`` command line: ``info``, ``render``, ``movie``, ``isosurface``, ``demo``, ``bench`` and ``view``.
 
 Exit codes: 0 success; 1 the work failed (no GL backend, a failed frame); 2 bad input
 (a message on stderr names the option and the value; no traceback, no output file);
@@ -12,7 +12,9 @@ bundled data set, ``builtin:ct_head`` or ``builtin:synthetic``, e.g.::
     dvr-gl render scan.raw --shape 93,64,64 --dtype int16 --spacing 3.2,3.2,1.5 --out scan.png
     dvr-gl render bluntfin_tets.vtu --scalars Pressure --sort centroid --out fin.png
 
-``info FILE`` describes a volume or mesh file instead of the GL backends.
+``info FILE`` describes a volume or mesh file instead of the GL backends; ``isosurface INPUT
+--iso V -o out.ply`` writes a level set as a triangle mesh (:mod:`dvr_gl.frontends.isosurface`);
+``movie INPUT -o out.mp4`` renders an orbit or a time series (:mod:`dvr_gl.frontends.movie`).
 """
 
 from __future__ import annotations
@@ -25,10 +27,11 @@ import sys
 import time
 
 from .. import formats as dvr_io
+from .isosurface import add_isosurface_parser, cmd_isosurface
 from .inputs import PRESETS  # presets and bundled data sets are shared with the viewer and dvr_gl.render
 from .options import (MESH_TECHNIQUES, OPTION_OF_FIELD, UsageError, _check_input_options, _origin, _shape,
                       _spacing, add_orientation_option, add_render_options, check_png, check_technique, clip_args,
-                      input_is_mesh, load_input_args, resolve_tf_option, technique_options)
+                      geometry_args, input_is_mesh, load_input_args, resolve_tf_option, technique_options)
 
 PROG = "dvr-gl"
 
@@ -69,6 +72,11 @@ def build_parser(bench_module=None):
     r.add_argument("--transparent", action="store_true",
                    help="write un-premultiplied RGBA instead of RGB over the background")
     add_render_options(r)
+
+    from .movie import add_movie_parser    # the movie command lives in its own module
+    add_movie_parser(sub)
+
+    add_isosurface_parser(sub)
 
     d = sub.add_parser("demo", help="render the bundled demo scenes to PNGs",
                        description="Render the bundled demo scenes into a folder.")
@@ -307,7 +315,7 @@ def cmd_render(args, out=None):
     try:
         scene = Scene(volume, tf, camera, width=width, height=height, mode=mode, iso_value=args.iso,
                       shading=args.shading, **({"lights": tuple(args.light)} if args.light else {}), **optical,
-                      **clip_args(args, volume))
+                      **clip_args(args, volume), **geometry_args(args, args.technique))
     except ValueError as e:
         if not optical:
             raise
@@ -461,6 +469,11 @@ def _main(argv):
             if args.file is not None:
                 return _guarded("info", cmd_info_file, args, debug)
             return cmd_info(args)
+        if command == "isosurface":
+            return _guarded("isosurface", cmd_isosurface, args, debug)
+        if command == "movie":
+            from .movie import cmd_movie
+            return _guarded("movie", cmd_movie, args, debug)
         if command == "demo":
             return cmd_demo(args)
         if command == "bench":

@@ -241,9 +241,21 @@ def parse_light(text):
 _RENDERERS = {}
 
 
+def _surfaces(geometry):
+    """``geometry`` for a Scene: Surfaces as they are, file names read as surfaces."""
+    items = (geometry,) if isinstance(geometry, (str, os.PathLike)) or hasattr(geometry, "faces") else geometry
+    if items is None:
+        return ()
+    try:
+        items = tuple(items)
+    except TypeError:
+        return geometry                       # the Scene names what is wrong
+    return tuple(dvr_io.load_surface(g) if isinstance(g, (str, os.PathLike)) else g for g in items)
+
+
 def render(source, *, tf=None, technique=None, size=(512, 512), azimuth=None, elevation=None, zoom=1.0, fov=30.0,
            ortho=False, mode="composite", iso=None, shading=None, lights=None, scalars=None, spacing=None,
-           orientation=None, clip_planes=(), crop_box=None, backend="auto", **options):
+           orientation=None, clip_planes=(), crop_box=None, geometry=(), backend="auto", **options):
     """Render ``source`` (anything :func:`load_input` takes) in one call; returns the
     (height, width, 4) float32 premultiplied RGBA image, row 0 on top, as a
     :class:`dvr_gl.frontends.images.RenderedImage` (an ndarray that Jupyter shows as a picture).
@@ -260,7 +272,9 @@ def render(source, *, tf=None, technique=None, size=(512, 512), azimuth=None, el
     technique lights them (:func:`shading_for`) unless ``shading=False``; ``lights``: a
     ``dvr_gl.Light`` or a list of them (the headlight by default). One renderer per
     backend is kept for the process, so later calls do not compile or upload again.
-    ``clip_planes`` and ``crop_box`` cut the data as in :class:`dvr_gl.Scene`."""
+    ``clip_planes`` and ``crop_box`` cut the data as in :class:`dvr_gl.Scene`; ``geometry``:
+    opaque :class:`dvr_gl.Surface` meshes (or surface files, read by
+    :func:`dvr_gl.formats.load_surface`) drawn with the data (technique raycast)."""
     from ..rendering.renderer import Renderer
     from ..model.scene import Scene
     data, preset = load_input(source, scalars=scalars, spacing=spacing, orientation=orientation)
@@ -280,7 +294,8 @@ def render(source, *, tf=None, technique=None, size=(512, 512), azimuth=None, el
     scene = Scene(data, tf, first_camera(data, azimuth=azimuth, elevation=elevation, zoom=zoom, fov=fov,
                                          ortho=ortho),
                   width=width, height=height, mode=mode, iso_value=iso, shading=shading,
-                  **({} if lights is None else {"lights": lights}), clip_planes=clip_planes, crop_box=crop_box)
+                  **({} if lights is None else {"lights": lights}), clip_planes=clip_planes, crop_box=crop_box,
+                  geometry=_surfaces(geometry))
     renderer = _RENDERERS.get(backend)
     if renderer is None:
         renderer = _RENDERERS[backend] = Renderer(backend=backend)

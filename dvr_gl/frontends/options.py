@@ -96,6 +96,39 @@ def clip_args(args, data):
     return {"clip_planes": tuple(planes), "crop_box": crop}
 
 
+def _color_value(text):
+    rgb = dvr_io.parse_triplet(text, "geometry_color")
+    if not all(0 <= v <= 1 for v in rgb):
+        raise dvr_io.InputError("geometry_color", f"components must lie in [0, 1], got {text!r}")
+    return rgb
+
+
+_geometry_color = _arg_type(_color_value, "colour")
+
+
+def geometry_args(args, technique):
+    """The ``geometry`` of a Scene from ``--geometry`` files (``formats.load_surface``,
+    coloured by ``--geometry-color``); a file that cannot be read, or a technique that
+    does not draw geometry, is a UsageError naming the option."""
+    from ..techniques.common import GEOMETRY_TECHNIQUES
+    paths = getattr(args, "geometry", None) or ()
+    color = getattr(args, "geometry_color", None)
+    if color is not None and not paths:
+        raise UsageError("--geometry-color", "colours the surfaces of --geometry; give one")
+    if not paths:
+        return {}
+    if technique not in GEOMETRY_TECHNIQUES:
+        raise UsageError("--geometry", f"is drawn by --technique {', '.join(GEOMETRY_TECHNIQUES)}, "
+                                       f"not {technique}")
+    surfaces = []
+    for path in paths:
+        try:
+            surfaces.append(dvr_io.load_surface(path, **({} if color is None else {"color": color})))
+        except dvr_io.InputError as e:
+            raise UsageError("--geometry", e.detail) from None
+    return {"geometry": tuple(surfaces)}
+
+
 def whole_number(minimum):
     """An argument type: a whole number of at least ``minimum``."""
     def convert(text):
@@ -233,6 +266,11 @@ def add_render_options(r):
                         "points to; repeat for up to 6")
     r.add_argument("--crop", type=_crop_box, metavar="X0,Y0,Z0,X1,Y1,Z1",
                    help="keep only what lies inside this axis-aligned box (world corners)")
+    r.add_argument("--geometry", action="append", metavar="FILE",
+                   help="raycast: an opaque triangle mesh (.obj, .stl, .ply, .vtk, ... in world units) drawn "
+                        "inside the data, lit; rays end at it. Clips leave it whole. Repeat for more")
+    r.add_argument("--geometry-color", type=_geometry_color, metavar="R,G,B",
+                   help="the colour of the --geometry surfaces (components in [0, 1]; default: 0.85,0.85,0.85)")
     r.add_argument("--size", type=_size, default=(512, 512), metavar="WxH",
                    help="image size in pixels (default: 512x512)")
     r.add_argument("--azimuth", type=_number, default=None, metavar="DEG",

@@ -10,6 +10,7 @@
 - ``field``: the field between samples (interpolation, gradients), read alike by the
   techniques, their NumPy twins and the exact integrator;
 - ``clipping``: clip planes and crop boxes; ``geometry``: opaque :class:`Surface` meshes;
+- ``series``: ``VolumeSeries``, volumes over time on one grid;
 - ``cell_split``: hexahedra, wedges and pyramids into tetrahedra; ``checks``: argument checks.
 """
 

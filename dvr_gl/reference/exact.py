@@ -42,6 +42,12 @@ Measured against a Richardson-extrapolated fine integration on single tets and s
 cubes: below 1e-11; against the tetra reference's closed-form segment integral on the
 blunt fin: 1.5e-11.
 
+Opaque geometry (``Scene.geometry``): every ray's first surface hit (``exact_geometry``,
+float64 Möller-Trumbore) ends its interval, ``t1 = min(t1, t_hit)`` (after the clip,
+which cuts the data only), for grids and meshes alike; every mode then runs on the
+shortened ray, and the surface's lit colour goes behind the pixel it made:
+``C + (1 - A) * colour``, A = 1 (for emission-absorption ``1 - A`` is ``T(t_hit)``).
+
 Choices where the contract is silent: alpha = 1 at any point of the ray (its last point
 too) ends the ray there; the remaining transmittance goes to that point's colour and
 A = 1 exactly. Masked volumes: a cell with a non-finite corner is outside the domain for
@@ -64,6 +70,7 @@ import numpy as np
 from ..model.clipping import clip_interval, plane_offsets
 from ..model.scene import Scene
 from .common import ray_box
+from .exact_geometry import surface_behind, surface_hits
 from ..model.field import gradient, gradient_epsilon
 from .shading import sample_terms, scene_lights, shade_blinn_phong
 
@@ -904,6 +911,9 @@ def _render(scene):
     t0, t1 = ray_box(o, d, lo, hi)
     if scene.clips:                   # the contract over the kept part of the domain only
         t0, t1 = clip_interval(o, d, t0, t1, plane_offsets(scene.clip_planes), scene.crop_box)
+    if scene.geometry:                # opaque surfaces end the rays (whole: clips cut the data only)
+        t_surface, surface_color = surface_hits(scene, o, d)
+        t1 = np.minimum(t1, t_surface)
     out = np.zeros((W * H, 4))
     hit = np.flatnonzero(t1 > t0)
     chunks = range(0, hit.size, _CHUNK)
@@ -933,6 +943,8 @@ def _render(scene):
             progress.advance(f"exact image {W}x{H}")
     if progress is not None:
         progress.close()
+    if scene.geometry:                # each surface behind what its ray gathered in front of it
+        out = surface_behind(out, t_surface, surface_color)
     if not np.all(np.isfinite(out)):
         raise FloatingPointError("exact: non-finite pixel values (a bug in the integrator)")
     return out.reshape(H, W, 4)
@@ -950,8 +962,12 @@ def _render_mesh(scene):
     from .mesh_rays import MeshRays, clip_segments, kept_intervals, union_segments
     W, H = scene.width, scene.height
     rays = MeshRays(scene)
-    if scene.clips:                   # each ray's kept interval, world coordinates
+    cut = scene.clips or scene.geometry
+    if cut:                           # each ray's kept interval, world coordinates
         kept = kept_intervals(scene)
+    if scene.geometry:                # ... ended by the first surface (which clips leave whole)
+        t_surface, surface_color = surface_hits(scene)
+        kept = (kept[0], np.minimum(kept[1], t_surface))
     ex = _MeshExact(scene)
     out = np.zeros((W * H, 4))
     mode = scene.mode
@@ -962,7 +978,7 @@ def _render_mesh(scene):
         if progress is not None:
             progress.advance(f"exact image {W}x{H}")
         seg = union_segments(rays.segments(r0, r1))
-        if scene.clips:               # the contract over the kept part of the domain only
+        if cut:                       # the contract over the kept part of the domain only
             seg = clip_segments(seg, *kept)
         if seg["pixel"].size == 0:
             continue
@@ -986,6 +1002,8 @@ def _render_mesh(scene):
             raise ValueError(f"unknown mode {mode!r}")
     if progress is not None:
         progress.close()
+    if scene.geometry:
+        out = surface_behind(out, t_surface, surface_color)
     if not np.all(np.isfinite(out)):
         raise FloatingPointError("exact: non-finite pixel values (a bug in the integrator)")
     return out.reshape(H, W, 4)

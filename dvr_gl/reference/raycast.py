@@ -1,6 +1,10 @@
 """NumPy reference of the ray caster: the same plan (rays, segments, jitter table, lookup
 table, early termination) as ``shaders/raycast/raycast.frag``, in float64.
 
+Opaque geometry: each ray's first surface hit is the exact image's own float64 test
+(``exact_geometry.surface_hits``); the ray ends there and the surface's lit colour goes
+behind what it gathered, as the shader does with the hit its geometry pass rasterised.
+
 Empty-space skipping is not repeated here: it only leaves out segments whose opacity is
 exactly zero, so the image is the same without it (a GL test checks that claim).
 """
@@ -10,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from .common import blend_under, box_rays, classified_segment, classifier, sabella_color
+from .exact_geometry import surface_behind, surface_hits
 from ..model.field import cell_is_valid, trilinear, world_to_index
 from .shading import RayLighting, sample_terms, scene_lights, shade_blinn_phong
 from ..model.field import depth_range, gradient, gradient_epsilon
@@ -127,6 +132,9 @@ def render_plan(plan, lut_exact=False):
     lo, _ = volume.bounds
     classify, transparency = classifier(plan, lut_exact)
     origins, dirs, t0, t1 = box_rays(scene)
+    if scene.geometry:     # the ray ends at its first surface (GLSL: GEOMETRY; the exact image's own hit)
+        t_surface, surface_color = surface_hits(scene)
+        t1 = np.minimum(t1, t_surface)
     jitter = _jitter_per_pixel(plan, H, W).reshape(-1)
     n = origins.shape[0]
     out = np.zeros((n, 4))
@@ -283,4 +291,6 @@ def render_plan(plan, lut_exact=False):
             result[ok, :3] = shade_blinn_phong(rgb, g, d[ok], scene.phong, epsilon, lights)
             result[ok, 3] = 1.0
     out[hit] = result
+    if scene.geometry:     # the surface behind what the ray gathered
+        out = surface_behind(out, t_surface, surface_color)
     return out.reshape(H, W, 4)

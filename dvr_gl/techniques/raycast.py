@@ -78,6 +78,11 @@ gradients : "on_the_fly" (default) | "texture": where a lit sample's gradient co
     (``Scene(shading=True)`` and isosurface mode): six lookups of the field, or one of a
     gradient texture made once per volume (``techniques.common.shading_defines``).
 
+Opaque geometry (``Scene.geometry``): a pass before the ray casting finds each pixel's
+first surface and its lit colour (``techniques.geometry.surface_pass``); the ray ends
+there (``GEOMETRY``: ``t1 = min(t1, t_hit)``) and the colour is composited behind, and the
+proxy is then the full-screen triangle, so that surfaces outside the box show too.
+
 Shading (``Scene(shading=True)``, composite): each midpoint sample's colour is lit by the
 headlight with the gradient at the sample (``shaders/common/shading.glsl``) before it is
 associated with its opacity; a pre-integrated segment is lit as a whole with the
@@ -99,6 +104,7 @@ from ..model.transfer import LookupTable
 from .common import (cleared_target, add_optional_inputs, bind, box_proxy, box_view, camera_uniforms, check_flag,
                      check_scene, clip_defines, clip_uniforms, grow_pixels, shading_defines,
                      check_step, check_target, preintegration_applies, preintegration_table, tf_uniforms, volume_uniforms)
+from .geometry import surface_pass
 from .gpu import proxy_vao, target_fbo, tf_texture, volume_texture
 
 BRICK = 8            # brick edge in cells, for empty-space skipping
@@ -217,6 +223,8 @@ def make_plan(scene, step=None, *, target="rgba32f", jitter_seed=None, ert_trans
             defines["DETAIL_COUNT"] = max(len(detail), 1)
     defines.update(shading_defines(scene, gradients))
     defines.update(clip_defines(scene))
+    if scene.geometry:
+        defines["GEOMETRY"] = 1
     step_rows = None
     if check_flag("step_table", step_table) and uses_step_table(scene, preint):
         step_rows = tables.get("step_table", lut, step / scene.tf.unit_distance,
@@ -495,12 +503,15 @@ def draw(renderer, plan):
     scene = plan.scene
     volume = scene.volume
     occupied = occupied_range(renderer, plan)
+    surfaces = surface_pass(renderer, scene) if scene.geometry else None   # each pixel's first surface
     defines = dict(plan.defines, OCCUPIED_RANGE=1) if occupied is not None else plan.defines
     prog = renderer.programs.get("raycast/raycast.vert", "raycast/raycast.frag", defines)
 
     textures = {"t_volume": volume_texture(renderer, volume), "t_tf": tf_texture(renderer, plan.lut)}
     if occupied is not None:
         textures["t_occupied_range"] = occupied
+    if surfaces is not None:
+        textures["t_surface"] = surfaces
     if plan.jitter is not None:
         textures["t_jitter"] = jitter_texture(renderer, plan.jitter)
     if plan.occupancy is not None:
@@ -538,6 +549,8 @@ def draw(renderer, plan):
         prog["u_detail"].write(detail.tobytes())
 
     kind, view_proj = box_proxy(scene, grow_pixels=grow_pixels(renderer.ctx))
+    if surfaces is not None:          # a surface outside the box shows too: every pixel
+        kind, view_proj = "fullscreen", np.eye(4)
     prog["u_view_proj"].write(view_proj.astype("f4").tobytes())
     vao = proxy_vao(renderer, prog, kind)
     fbo = cleared_target(renderer, scene, plan.target)

@@ -42,6 +42,9 @@
 #ifndef REFINE
 #define REFINE 0          // pre-integration: split segments that may meet TF detail
 #endif
+#ifndef GEOMETRY
+#define GEOMETRY 0        // opaque surfaces end the rays and show behind them
+#endif
 
 #include "common/camera_ray.glsl"
 #include "common/ray_box.glsl"
@@ -102,6 +105,10 @@ bool touchesDetail(float lo, float hi) {
 #endif
 #if EARLY_RAY_TERMINATION
 uniform float u_ert_transmittance;
+#endif
+#if GEOMETRY
+uniform sampler2D t_surface;  // per pixel: the first surface's lit colour and its ray
+                              // parameter t (3e38: none), techniques.geometry.surface_pass
 #endif
 #if MODE_ISOSURFACE
 uniform float u_iso;
@@ -201,7 +208,18 @@ void main() {
     pixelRay(origin, dir);
     vec2 range = clipRange(origin, dir, intersectBox(origin, dir, vec3(0.0), u_extent));
     f_color = vec4(0.0);
+#if GEOMETRY
+    // the ray ends at its first surface, which is composited behind what it gathered
+    vec4 surface = texelFetch(t_surface, ivec2(gl_FragCoord.xy), 0);
+    bool on_surface = surface.a < 1e38;
+    range.y = min(range.y, surface.a);
+    if (range.y <= range.x) {
+        if (on_surface) f_color = vec4(surface.rgb, 1.0);
+        return;
+    }
+#else
     if (range.y <= range.x) return;
+#endif
     float t0 = range.x, t1 = range.y;
 
 #if JITTER
@@ -545,5 +563,9 @@ void main() {
         vec3 rgb = applyTF(u_iso).rgb;
         f_color = vec4(shadeBlinnPhong(rgb, gradient(p_hit), dir), 1.0);
     }
+#endif
+#if GEOMETRY
+    // the surface under the over operator: C + (1 - A) colour, A = 1
+    if (on_surface) f_color = vec4(f_color.rgb + (1.0 - f_color.a) * surface.rgb, 1.0);
 #endif
 }

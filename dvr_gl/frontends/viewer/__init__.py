@@ -57,6 +57,7 @@ Each module is one idea; the arrows of their imports point down this list.
 - ``overlay``: the transfer-function editor and its drawing
 - ``orbit``: the camera (:class:`Orbit`);  ``picking``: point picking on grids and meshes
 - ``keys``: glfw's key codes and the key list (``KEYS_HELP``)
+- ``clipping``: the clip plane's keys (k, K) and alt + drag
 """
 
 from .app import Viewer

@@ -68,6 +68,7 @@ class Viewer:
         self.lights = settings.lights
         self.step = settings.step          # None: the technique's default
         self.clip_planes, self.crop_box = settings.clip_planes, settings.crop_box
+        self.geometry = settings.geometry
         self.tolerance = settings.tolerance  # raycast: an RMSE the full frames are rendered to
         self.options = dict(settings.options)  # technique options: command line, then keys
         self.technique = settings.technique
@@ -190,7 +191,7 @@ class Viewer:
                      mode=self.mode, iso_value=self.iso if self.mode == "isosurface" else None,
                      shading=self.lit, **({"lights": self.lights} if self.lights else {}),
                      optical_model=self.optical_model, illustration=self.illustration,
-                     clip_planes=self.clip_planes, crop_box=self.crop_box)
+                     clip_planes=self.clip_planes, crop_box=self.crop_box, geometry=self.geometry)
 
     @property
     def lit(self):

@@ -8,7 +8,8 @@ its Controls; tests call the handlers directly with synthetic events.
 Mouse gestures on the transfer-function editor's panel belong to the editor
 (:class:`~.overlay.TFEditor`); elsewhere a left drag orbits, a right drag zooms, a
 middle (or shift + left) drag pans, ctrl + left drag sets the window/level of the
-transfer function, and a double click recentres (:meth:`Viewer.recentre`).
+transfer function, alt + left drag moves the clip plane (:mod:`.clipping`), and a double
+click recentres (:meth:`Viewer.recentre`).
 """
 
 from __future__ import annotations
@@ -17,8 +18,9 @@ import math
 import os
 
 from .choices import next_illustration, next_optical_model, switch_shading
+from .clipping import aim_clip, move_clip, toggle_clip
 from .keys import (KEY_COMMA, KEY_EQUAL, KEY_ESCAPE, KEY_F1, KEY_KP_ADD, KEY_KP_SUBTRACT, KEY_LEFT_BRACKET,
-                   KEY_MINUS, KEY_PERIOD, KEY_RIGHT_BRACKET, KEYS_HELP, MOD_CONTROL, MOD_SHIFT, MOUSE_LEFT,
+                   KEY_MINUS, KEY_PERIOD, KEY_RIGHT_BRACKET, KEYS_HELP, MOD_ALT, MOD_CONTROL, MOD_SHIFT, MOUSE_LEFT,
                    MOUSE_MIDDLE, MOUSE_RIGHT, PRESS, RELEASE, REPEAT, REPEATABLE)
 
 
@@ -73,6 +75,9 @@ class Controls:
             v.orbit.pan(-dx * wpp, dy * wpp)
         elif kind == "zoom":
             v.orbit.zoom(math.exp(-2.0 * dy / max(wh, 1)))
+        elif kind == "clip":
+            move_clip(v, -dy)      # up moves the plane along its normal
+            return
         elif kind == "window_level":
             x0, y0 = drag["start"]
             shift = (x - x0) / max(ww, 1) * (v.editor.hi - v.editor.lo)
@@ -115,7 +120,9 @@ class Controls:
                     and math.hypot(x - last[1], y - last[2]) <= 5):
                 v.recentre(x, y)
                 return
-            if mods & MOD_CONTROL:
+            if mods & MOD_ALT and v.clip_planes:
+                kind = "clip"
+            elif mods & MOD_CONTROL:
                 kind = "window_level"
             elif mods & MOD_SHIFT:
                 kind = "pan"
@@ -201,6 +208,11 @@ class Controls:
             v.toggle_option("preintegrate")
         elif char == "c":
             v.cycle_sort()
+        elif char == "k":
+            if shift:
+                aim_clip(v)
+            else:
+                toggle_clip(v)
         elif key in (KEY_MINUS, KEY_KP_SUBTRACT):
             v.change_step(coarser=True)
         elif key in (KEY_EQUAL, KEY_KP_ADD):

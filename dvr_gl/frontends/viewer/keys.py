@@ -29,6 +29,7 @@ dvr-gl view: keys and mouse
   right drag, wheel    zoom
   middle / shift drag  pan
   ctrl + left drag     window/level of the transfer function (x: level, y: width)
+  alt + left drag      move the clip plane along its normal (up: along it)
   double click         recentre on the point under the cursor (on nothing: the volume centre)
   r                    reset the view
   t / T                next / previous technique (those that can render this data)
@@ -39,6 +40,7 @@ dvr-gl view: keys and mouse
   i                    illustration: none, boundary, silhouette, tone, depth cue, all four
   p                    pre-integration on / off (techniques that offer it)
   c                    cell order mpvo / centroid (tetra, for meshes)
+  k / K                clip plane through the centre facing you, on / off; turn it to face you
   - / =                coarser / finer step (slice2d: fewer / more interpolated slices;
                        tetra: none, each cell is integrated exactly; raycast with
                        --tolerance: twice / half the tolerance)

@@ -64,6 +64,7 @@ class Settings:
     tolerance: float | None = None       # raycast: full frames at the step for this RMSE
     clip_planes: tuple = ()              # ((point, normal), ...), world units
     crop_box: tuple | None = None        # (lower, upper) world corners
+    geometry: tuple = ()                 # opaque dvr_gl.Surface meshes (--geometry)
 
 
 def build_parser():
@@ -99,7 +100,7 @@ def build_parser():
 def settings_from_args(args) -> Settings:
     """Check the options and load the input (no window yet): a bad file fails here."""
     from ..options import UsageError, check_png, check_technique, load_input_args, resolve_tf_option, \
-        technique_options, clip_args
+        technique_options, clip_args, geometry_args
 
     screenshot, option = (args.screenshot, "--screenshot") if args.screenshot else (args.out, "--out")
     if screenshot:
@@ -131,4 +132,4 @@ def settings_from_args(args) -> Settings:
                     lights=tuple(args.light) if getattr(args, "light", None) else None,
                     optical_model=getattr(args, "optical_model", None) or "emission_absorption",
                     illustration=tuple(getattr(args, "illustration", None) or ()), tolerance=tolerance,
-                    **clip_args(args, volume))
+                    **clip_args(args, volume), **geometry_args(args, args.technique))
