@@ -1146,3 +1146,19 @@ def test_clip_option_reaches_the_viewer(open_viewer):
     v = head_viewer(open_viewer, "--clip", "100,100,70,1,0,0", "--crop", "0,0,0,150,150,100")
     scene = v.render_arguments()[0]
     assert len(scene.clip_planes) == 1 and scene.crop_box is not None
+
+
+def test_geometry_key_hides_and_shows_the_surfaces(open_viewer, tmp_path):
+    import meshio
+    lo, hi = data.ct_head().bounds
+    c = (lo + hi) / 2
+    quad = np.array([c + (-40, -40, 0), c + (40, -40, 0), c + (40, 40, 0), c + (-40, 40, 0)])
+    meshio.write(str(tmp_path / "quad.obj"), meshio.Mesh(quad, [("triangle", np.array([[0, 1, 2], [0, 2, 3]]))]))
+    v = head_viewer(open_viewer, "--geometry", str(tmp_path / "quad.obj"))
+    assert len(v.render_arguments()[0].geometry) == 1
+    press(v, "g")
+    assert v.render_arguments()[0].geometry == ()
+    press(v, "g")
+    assert len(v.render_arguments()[0].geometry) == 1
+    press(v, "t")                  # techniques that draw no surfaces are skipped, the surface kept
+    assert v.technique == "raycast" and len(v.render_arguments()[0].geometry) == 1

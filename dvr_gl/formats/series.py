@@ -29,10 +29,8 @@ the field that was wrong, as for single volumes.
 from __future__ import annotations
 
 import glob
-import math
 import os
 import re
-import warnings
 
 import numpy as np
 
@@ -40,6 +38,7 @@ from ..model.series import StepMismatchError, VolumeSeries
 from ..model.volume import Volume
 from .anatomy import _Assumed, right_handed
 from .errors import InputError, MissingFileError, _existing_file, _named_errors
+from .nifti import read_nifti
 from .nrrd import _nrrd_geometry, _nrrd_lines, _nrrd_orientation
 from .numpy_files import _load_npy, _load_npz
 from .parsing import _triplet, parse_orientation
@@ -234,24 +233,8 @@ def _load_nrrd_4d(path):
 def _load_nifti_4d(path):
     """(data (nt, nz, ny, nx), spacing, origin, orientation) of a 4-D NIfTI: its fourth
     dimension is time."""
-    try:
-        import nibabel
-    except ImportError:
-        raise InputError("path", f"{path!r} is NIfTI, which needs nibabel: pip install \"dvr-gl[io]\" "
-                                 "(or pip install nibabel)") from None
-    image = nibabel.load(path)
-    data = np.asanyarray(image.dataobj)
+    data, zooms, origin, orientation = read_nifti(path, what="series")
     if data.ndim != 4:
         raise InputError("path", f"{path!r} holds a {data.ndim}-D image of shape {data.shape}; a series in one "
                                  "file is 4-D (x, y, z, t)")
-    zooms = tuple(float(v) for v in image.header.get_zooms()[:3])
-    if not all(v > 0 and math.isfinite(v) for v in zooms):
-        raise InputError("pixdim", f"{path!r} has voxel sizes {zooms}; they must be positive")
-    affine = np.asarray(image.affine, np.float64)
-    linear = affine[:3, :3]
-    if not np.allclose(linear, np.diag(np.diag(linear))) or (np.diag(linear) <= 0).any():
-        warnings.warn(f"{path}: the affine's axes are not x, y, z with positive steps; the series is shown "
-                      "axis-aligned in index order, without that orientation", stacklevel=3)
-    origin = tuple(float(v) for v in affine[:3, 3])
-    orientation = "".join(nibabel.aff2axcodes(affine))
     return np.ascontiguousarray(np.transpose(data, (3, 2, 1, 0))), zooms, origin, orientation

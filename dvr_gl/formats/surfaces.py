@@ -20,6 +20,7 @@ import os
 import numpy as np
 
 from ..model.geometry import Surface
+from ..util.files import atomic_path
 from .errors import InputError, _existing_file, _named_errors, _optional
 
 __all__ = ["load_surface", "save_surface", "surface_format", "SURFACE_FORMATS"]
@@ -67,19 +68,8 @@ def save_surface(path, surface):
         faces = faces.astype(np.int32)
     mesh = meshio.Mesh(np.asarray(surface.vertices, np.float64), [("triangle", faces)])
     options = {"binary": True} if file_format in ("ply", "stl", "vtk") else {}
-    import secrets
-    tmp = os.path.join(directory, f".{stem}.{secrets.token_hex(4)}.tmp{extension}")
-    try:
+    with atomic_path(path, extension) as tmp:
         meshio.write(tmp, mesh, file_format=file_format, **options)
-        with open(tmp, "rb+") as f:              # on disk before the rename
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        raise
     return path
 
 

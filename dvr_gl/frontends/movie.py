@@ -32,7 +32,6 @@ is left. Writing needs imageio and imageio-ffmpeg (which brings its own ffmpeg):
 from __future__ import annotations
 
 import os
-import secrets
 import statistics
 import sys
 import time
@@ -43,6 +42,7 @@ import numpy as np
 from .. import formats as dvr_io
 from ..formats import InputError
 from ..model.series import VolumeSeries
+from ..util.files import atomic_path
 from ..formats.series import is_pattern
 from .options import (UsageError, _number, _positive, add_render_options, check_technique, clip_args,
                       geometry_args, technique_options, whole_number)
@@ -270,7 +270,7 @@ def render_movie(source, path, *, frames=None, orbit=None, fps=24, size=(512, 51
     bar = Progress(len(plan)) if progress else None
     began = time.perf_counter()
     try:
-        with _movie_file(os.fspath(path), fmt) as tmp:
+        with atomic_path(os.fspath(path), fmt) as tmp:
             writer = _open_writer(imageio, tmp, fmt, fps)
             try:
                 for i, (step, turn) in enumerate(plan):
@@ -324,42 +324,6 @@ def _open_writer(imageio, tmp, fmt, fps):
                                   pixelformat="yuv420p", macro_block_size=1, quality=None,
                                   output_params=["-crf", "18"], ffmpeg_log_level="error")
     return imageio.get_writer(tmp, format="GIF", mode="I", duration=1000.0 / fps, loop=0)
-
-
-class _movie_file:
-    """A temporary file beside ``path`` (with the same extension, which the writers go
-    by) that becomes ``path`` when the block ends without an error, and is removed when
-    it ends with one."""
-
-    def __init__(self, path, ext):
-        self.path = path
-        directory, name = os.path.split(os.path.abspath(path))
-        flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0)
-        for _ in range(100):
-            tmp = os.path.join(directory, f".{name}.{secrets.token_hex(4)}.tmp{ext}")
-            try:
-                os.close(os.open(tmp, flags, 0o666))
-                break
-            except FileExistsError:
-                continue
-        else:
-            raise FileExistsError(f"could not create a temporary file in {directory!r}")
-        self.tmp = tmp
-
-    def __enter__(self):
-        return self.tmp
-
-    def __exit__(self, kind, value, traceback):
-        if kind is None:
-            with open(self.tmp, "rb+") as f:
-                os.fsync(f.fileno())
-            os.replace(self.tmp, self.path)
-            return False
-        try:
-            os.unlink(self.tmp)
-        except FileNotFoundError:
-            pass
-        return False
 
 
 # ----------------------------------------------------------------------------- the command

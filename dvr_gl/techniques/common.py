@@ -259,14 +259,20 @@ def sample_term_uniforms(renderer, scene, defines):
     out = {"u_phong": scene.phong, "u_gradient_epsilon": gradient_epsilon(scene.volume),
            **illustration_uniforms(renderer, scene)}
     if defines.get("LIGHTS"):
-        lights = np.zeros((MAX_LIGHTS, 4), np.float32)
-        for row, light in zip(lights, scene.lights):
-            direction = light.world_direction(scene.camera)
-            row[:3] = 0.0 if direction is None else direction
-            row[3] = light.intensity
-        out["u_light_count"] = len(scene.lights)
-        out["u_lights"] = [tuple(row) for row in lights.tolist()]
+        out.update(light_uniforms(scene))
     return out
+
+
+def light_uniforms(scene):
+    """The scene's lights as the uniforms of ``phongTerms`` (shaders/common/shading.glsl):
+    their count and, per light, (world direction towards it, or 0 for a headlight;
+    intensity)."""
+    lights = np.zeros((MAX_LIGHTS, 4), np.float32)
+    for row, light in zip(lights, scene.lights):
+        direction = light.world_direction(scene.camera)
+        row[:3] = 0.0 if direction is None else direction
+        row[3] = light.intensity
+    return {"u_light_count": len(scene.lights), "u_lights": [tuple(row) for row in lights.tolist()]}
 
 
 def bind(prog, textures, uniforms, first_unit=0):

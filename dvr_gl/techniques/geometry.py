@@ -22,8 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..model.camera import MAX_LIGHTS
-from .common import NEAR_FRACTION, bind, camera_uniforms, eye_view_projection
+from .common import NEAR_FRACTION, bind, camera_uniforms, eye_view_projection, light_uniforms
 
 NO_SURFACE = 3e38     # t where a pixel's ray meets no surface
 
@@ -59,18 +58,12 @@ def surface_projection(scene, positions):
     return eye_view_projection(scene, near, far)
 
 
-def light_uniforms(scene):
+def surface_light_uniforms(scene):
     """Uniforms of ``phongTerms`` (shaders/common/shading.glsl) for surfaces: the scene's
     ``phong`` and lights, no gradient threshold (a unit normal is always lit)."""
     out = {"u_phong": scene.phong, "u_gradient_epsilon": 0.0}
     if not scene.headlight_only:
-        lights = np.zeros((MAX_LIGHTS, 4), np.float32)
-        for row, light in zip(lights, scene.lights):
-            direction = light.world_direction(scene.camera)
-            row[:3] = 0.0 if direction is None else direction
-            row[3] = light.intensity
-        out["u_light_count"] = len(scene.lights)
-        out["u_lights"] = [tuple(row) for row in lights.tolist()]
+        out.update(light_uniforms(scene))
     return out
 
 
@@ -106,7 +99,7 @@ def surface_pass(renderer, scene):
     vbo = store.for_objects("surface_vbo", vertices, make=lambda: ctx.buffer(vertices.tobytes()), capacity=2)
     vao = store.for_objects("surface_vao", vbo, prog, make=lambda: ctx.vertex_array(
         prog, [(vbo, "3f 3f 3f", "a_position", "a_normal", "a_color")]), capacity=4)
-    bind(prog, {}, {**camera_uniforms(scene), **light_uniforms(scene)})
+    bind(prog, {}, {**camera_uniforms(scene), **surface_light_uniforms(scene)})
     prog["u_view_proj"].write(surface_projection(scene, vertices[:, :3]).astype("f4").tobytes())
     width, height = scene.target_size
     target = store.get("surface_target", (width, height),

@@ -239,12 +239,12 @@ class Viewer:
     def state(self):
         """The rendering choices (not the camera or the transfer function)."""
         return (self.technique, self.mode, self.iso, self.shading, self.optical_model, self.illustration,
-                dict(self.options), self.step)
+                dict(self.options), self.step, self.geometry)
 
     def restore(self, state, changed=True):
         """Go back to rendering choices :meth:`state` returned."""
         (self.technique, self.mode, self.iso, self.shading, self.optical_model, self.illustration, options,
-         self.step) = state
+         self.step, self.geometry) = state
         self.options = dict(options)
         if changed:
             self.changed()

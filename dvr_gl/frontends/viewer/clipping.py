@@ -1,6 +1,7 @@
-"""The viewer's clip plane: k cuts the data with a plane through its centre that faces
-the eye (the near half is cut away), K turns the plane to face the eye again, and alt +
-left drag moves it along its normal. The plane is a Scene clip plane like any other
+"""The viewer's clip plane and surfaces: k cuts the data with a plane through its centre
+that faces the eye (the near half is cut away), K turns the plane to face the eye again,
+alt + left drag moves it along its normal, and g shows or hides the surfaces given with
+``--geometry``. The plane is a Scene clip plane like any other
 (``Scene(clip_planes=...)``), so every technique renders the cut and the screenshot
 matches ``dvr-gl render --clip``."""
 
@@ -50,3 +51,20 @@ def move_clip(v, pixels):
     moved = np.clip(point + step * unit, lo, hi)
     v.clip_planes = ((moved, normal),) + tuple(v.clip_planes[1:])
     v.changed(interactive=True)
+
+
+def toggle_geometry(v):
+    """Hide the scene's surfaces (``--geometry``), or show them again; the choice is
+    tried, so a technique that does not draw surfaces keeps them hidden and says why."""
+    if v.geometry:
+        v.hidden_geometry, v.geometry = v.geometry, ()
+        v.say("surfaces hidden (g: shown)")
+        v.changed()
+        return
+    hidden = getattr(v, "hidden_geometry", ())
+    if not hidden:
+        v.say("no surfaces to show (dvr-gl view ... --geometry FILE)")
+        return
+    if v.try_change(lambda: setattr(v, "geometry", hidden), "show the surfaces") is True:
+        v.hidden_geometry = ()
+        v.say("surfaces shown")

@@ -41,6 +41,7 @@ dvr-gl view: keys and mouse
   p                    pre-integration on / off (techniques that offer it)
   c                    cell order mpvo / centroid (tetra, for meshes)
   k / K                clip plane through the centre facing you, on / off; turn it to face you
+  g                    show / hide the surfaces given with --geometry
   - / =                coarser / finer step (slice2d: fewer / more interpolated slices;
                        tetra: none, each cell is integrated exactly; raycast with
                        --tolerance: twice / half the tolerance)
