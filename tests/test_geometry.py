@@ -482,7 +482,7 @@ def test_bad_geometry_in_a_scene_is_named():
         constant_scene(geometry=[square(0, 1, 0, 1, 2), "sphere.obj"])
 
 
-@pytest.mark.parametrize("technique", ["slice2d", "slice3d", "particles", "splat"])
+@pytest.mark.parametrize("technique", ["splat"])
 def test_techniques_that_do_not_draw_geometry_say_so(renderer, technique):
     scene = constant_scene(geometry=[square(4.0, 30.0, 2.0, 9.0, 6.5)])
     with pytest.raises(ValueError, match=f"{technique} does not draw geometry yet: .* rendered by raycast"):
@@ -556,7 +556,8 @@ def test_cli_render_and_view_take_geometry(renderer, sphere_file, tmp_path, caps
 
 
 @pytest.mark.parametrize("extra, fragment", [
-    (["--technique", "slice3d"], "--geometry: is drawn by --technique raycast, not slice3d"),
+    (["--technique", "splat"], "--geometry: is drawn by --technique raycast, "),
+    (["--technique", "splat"], ", not splat"),
     (["--geometry-color", "2,0,0"], "--geometry-color"),
 ])
 def test_cli_geometry_errors_name_the_option(sphere_file, tmp_path, capsys, extra, fragment):

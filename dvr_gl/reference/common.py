@@ -224,6 +224,25 @@ def gap_pass(acc, gap, rays, plan, max_step, lut_exact=False):
     acc[rows[drawn]] = blend_over(acc[rows[drawn]], src[drawn], plan.target)
 
 
+def surface_rays(scene, t1, target="rgba32f"):
+    """The slicing techniques' opaque geometry (GLSL ``GEOMETRY`` in slice2d.frag and
+    slice3d.frag, and ``geometry/surface_behind.frag``): (the target's content before the
+    first slice, (n, 4): each ray's first surface's lit colour with opacity 1, 0 where no
+    surface; the exits ``t1`` ended at the surface; the hits t, inf where none). The hit
+    is the exact image's own (``exact_geometry.surface_hits``). Without geometry: zeros,
+    ``t1`` as it is and no hits."""
+    n = len(t1)
+    if not scene.geometry:
+        return np.zeros((n, 4)), t1, np.full(n, np.inf)
+    from .exact_geometry import surface_hits
+    t_hit, color = surface_hits(scene)
+    hit = np.isfinite(t_hit)
+    acc = np.zeros((n, 4))
+    acc[hit, :3] = color[hit]
+    acc[hit, 3] = 1.0
+    return round_to_target(acc, target), np.minimum(t1, t_hit), t_hit
+
+
 def round_to_target(x, target):
     """What a render target of format ``target`` stores for the float values ``x``.
 

@@ -7,12 +7,16 @@ As GL does with points, a particle whose centre lies outside the view's clip vol
 not drawn (``sprites``). With clip planes or a crop box, a particle counts on a pixel's ray
 where its centre's projection on the ray lies in the ray's kept part (``sprites.kept_ranges``,
 the fragment shader's test); spheres that miss the kept region are dropped beforehand.
+With opaque geometry the kept part ends at the ray's first surface (``exact_geometry``'s
+float64 hit, GLSL ``GEOMETRY``), and the surface's lit colour is composited behind each
+set's image (as behind their average: the operator is linear in the image).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from .exact_geometry import surface_behind, surface_hits
 from .sprites import kept_ranges, sprite_pixel_pairs
 
 
@@ -22,21 +26,30 @@ def render_plan(plan, lut_exact=False):
     scene = plan.scene
     W, H = scene.width, scene.height
     out = np.zeros((H * W, 4))
+    t_surface = None
+    if scene.geometry:     # the ray ends at its first surface (GLSL: GEOMETRY)
+        t_surface, surface_color = surface_hits(scene)
     for k, particle_set in enumerate(plan.sets):
         gradients = None if plan.gradients is None else plan.gradients[k]
-        out += first_hits(scene, plan.radius, particle_set.points, particle_set.colors, gradients)
-    return (out / plan.repetitions).reshape(H, W, 4)
+        out += first_hits(scene, plan.radius, particle_set.points, particle_set.colors, gradients, t_surface)
+    out /= plan.repetitions
+    if t_surface is not None:
+        out = surface_behind(out, t_surface, surface_color)
+    return out.reshape(H, W, 4)
 
 
-def first_hits(scene, radius, points, colors, gradients=None):
+def first_hits(scene, radius, points, colors, gradients=None, t_end=None):
     """(H * W, 4): per pixel the colour (alpha 1) of the first sphere its ray enters, or 0;
     with ``gradients`` (lit), that colour lit with the sphere's gradient along the pixel's
-    ray (GLSL ``shadeBlinnPhong``)."""
+    ray (GLSL ``shadeBlinnPhong``). ``t_end`` (per pixel, optional): the ray ends there
+    (its first surface), particles whose centre projects beyond it do not count."""
     W, H = scene.width, scene.height
     p = np.asarray(points, np.float64)
     kept, origins, dirs, chunks = sprite_pixel_pairs(scene, p, radius)
     p, colors = p[kept], np.asarray(colors, np.float64)[kept]
     keep0, keep1 = kept_ranges(scene, origins, dirs)
+    if t_end is not None:
+        keep1 = np.minimum(keep1, t_end)
     best = np.full(W * H, np.inf)
     owner = np.full(W * H, -1, np.int64)
     for ids, pixel in chunks:

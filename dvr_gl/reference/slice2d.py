@@ -1,12 +1,14 @@
 """NumPy reference of 2D texture slicing: the same stack, slice order, per-fragment slabs
-and blending as ``shaders/slice2d/slice2d.frag``, in float64, then its gap pass."""
+and blending as ``shaders/slice2d/slice2d.frag``, in float64, then its gap pass. With
+opaque geometry each ray ends at the exact image's own first hit (``surface_rays``): a
+slice point behind it is no slice, and the surface's colour is drawn first."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from ..techniques.slice2d import across_stack
-from .common import blend_over, box_rays, gap_pass, classified_segment, classifier
+from .common import blend_over, box_rays, surface_rays, gap_pass, classified_segment, classifier
 from ..model.field import cell_is_valid, trilinear, world_to_index
 from .shading import ray_lighting
 
@@ -20,6 +22,7 @@ def render_plan(plan, lut_exact=False):
     extent = volume.extent
     w, (u, v) = plan.axis, plan.other_axes
     o, d, t0, t1 = box_rays(scene)
+    acc, t1, t_hit = surface_rays(scene, t1, plan.target)
     cos_theta = d @ cam.forward
     ahead = np.where(d[:, w] > 0, 1, -1)
     moving = d[:, w] != 0
@@ -60,6 +63,8 @@ def render_plan(plan, lut_exact=False):
                 q[:, w] = j * plan.slice_distance
                 ok &= clip_keeps(j, q)
             ok &= within(p, u) & within(p, v)
+            if scene.geometry:    # GLSL: t > t_hit is behind the pixel's surface
+                ok &= ~(t > t_hit)
         return ok
 
     def sample(j, t):
@@ -67,7 +72,6 @@ def render_plan(plan, lut_exact=False):
         idx[:, w] = j / (plan.interpolate + 1)
         return trilinear(values, idx)
 
-    acc = np.zeros((len(o), 4))
     for j in plan.order:  # far to near
         j_all = np.full(len(o), j)
         t = slice_t(j_all)

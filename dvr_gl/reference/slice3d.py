@@ -3,13 +3,15 @@ blending order as ``shaders/slice3d/slice3d.frag``, in float64 (per-target round
 the blending as ``common.blend_over`` models it). The polygons only decide which pixels
 a slice may cover; the shader's per-fragment test decides which it does, so the
 reference applies that test to every pixel (and the gap pass's test after the slices).
-With clip planes or a crop box the rays' intervals (``box_rays``) are the kept ones."""
+With clip planes or a crop box the rays' intervals (``box_rays``) are the kept ones; with
+opaque geometry they end at the exact image's own first hit (``surface_rays``), and the
+surface's lit colour is the target's content before the first slice."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from .common import blend_over, box_rays, gap_pass, plane_inside, segment_colors, slab_segment
+from .common import blend_over, box_rays, surface_rays, gap_pass, plane_inside, segment_colors, slab_segment
 from ..model.field import cell_is_valid, trilinear, world_to_index
 from .shading import ray_lighting
 
@@ -21,6 +23,7 @@ def render_plan(plan, lut_exact=False):
     values = volume.values(np.float64)
     lo, _ = volume.bounds
     o, d, t0, t1 = box_rays(scene)
+    acc, t1, _ = surface_rays(scene, t1, plan.target)
     cos_theta = d @ cam.forward
 
     def slice_t(k):
@@ -30,7 +33,6 @@ def render_plan(plan, lut_exact=False):
     def inside(k, t):
         return plane_inside(k, plan.count, t, t0, t1)
 
-    acc = np.zeros((len(o), 4))
     for k in range(plan.count):  # far to near
         t = slice_t(k)
         here = inside(k, t)

@@ -11,13 +11,20 @@ is counted once.
 Clip planes and a crop box: each (cell, pixel) segment is cut to the pixel ray's kept
 interval (box coordinates, as the shader's ``clipRange``), its end values interpolated
 linearly, before anything else; empty ones are dropped, as the shader discards them.
+
+Opaque geometry: each pixel's first surface hit is the exact image's own float64 test
+(``exact_geometry.surface_hits``); every segment is cut at it as at a clip (``clip_segments``
+with the interval [0, t_hit]). Composite: the surface's lit colour, opaque, is the
+target's backmost layer, the cells blended over it; mip, minip, average: the surface goes
+behind the shortened ray's classified value (``surface_behind``).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from .common import blend_over
+from .common import blend_over, round_to_target
+from .exact_geometry import surface_behind, surface_hits
 from .linear_segment import linear_segment
 from .mesh_rays import clip_segments, kept_intervals, ray_tet_segments, union_segments
 from .shading import sample_terms
@@ -29,14 +36,30 @@ def render_plan(plan, lut_exact=False):
     scene = plan.scene
     W, H = scene.width, scene.height
     out = np.zeros((H * W, 4))
+    t_surface = None
+    if scene.geometry:      # the surface, opaque, as the backmost layer (tetra.frag: GEOMETRY)
+        t_surface, surface_color = surface_hits(scene)
+        if scene.mode == "composite":
+            hit = np.isfinite(t_surface)
+            out[hit, :3] = surface_color[hit]
+            out[hit, 3] = 1.0
+            if plan.target != "rgba32f":
+                out = round_to_target(out, plan.target)
     if plan.draw.size == 0:
+        if t_surface is not None and scene.mode != "composite":
+            out = surface_behind(out, t_surface, surface_color)
         return out.reshape(H, W, 4)
     seg = ray_tet_segments(scene, tets=plan.draw)
     if scene.clips:     # each fragment's segment cut to its ray's kept interval (tetra.frag)
         seg = clip_segments(seg, *kept_intervals(scene, box_coordinates=True))
+    if t_surface is not None:    # and at its pixel's first surface
+        seg = clip_segments(seg, np.zeros_like(t_surface), t_surface)
     seg = union_segments(seg)
     if scene.mode != "composite":
-        return _reduce(scene, seg, out).reshape(H, W, 4)
+        out = _reduce(scene, seg, out)
+        if t_surface is not None:
+            out = surface_behind(out, t_surface, surface_color)
+        return out.reshape(H, W, 4)
     rank = np.full(len(scene.volume.tets), -1, np.int64)
     rank[plan.draw] = np.arange(plan.draw.size)
     r = rank[seg["tet"]]
@@ -61,6 +84,8 @@ def render_plan(plan, lut_exact=False):
                                       weights=True, cue=cue)
         rgba[:, :3] = rgba[:, :3] * factor[:, None] + offset * weight[:, None]
     # layer k of a pixel is its k-th fragment in draw order; blend layer by layer
+    if pix.size == 0:       # every segment cut away (behind a surface, or clipped)
+        return out.reshape(H, W, 4)
     first = np.concatenate([[0], np.flatnonzero(pix[1:] != pix[:-1]) + 1])
     counts = np.diff(np.concatenate([first, [pix.size]]))
     layer = np.arange(pix.size) - np.repeat(first, counts)

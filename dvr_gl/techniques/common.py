@@ -20,7 +20,7 @@ SHADING_TECHNIQUES = ("raycast", "slice3d", "slice2d")   # those with every samp
 LIGHTING_TECHNIQUES = SHADING_TECHNIQUES + ("tetra", "particles", "splat")   # those that light composite samples
 GRADIENTS = ("on_the_fly", "texture")
 CLIPPING_TECHNIQUES = ("raycast", "tetra", "slice2d", "slice3d", "particles", "splat")   # those that clip to Scene.clip_planes and crop_box
-GEOMETRY_TECHNIQUES = ("raycast",)   # those that end rays at Scene.geometry (opaque surfaces)
+GEOMETRY_TECHNIQUES = ("raycast", "particles", "slice2d", "slice3d", "tetra")   # those that end rays at Scene.geometry (opaque surfaces)
 
 
 def check_scene(scene, technique, modes=None, data="volume"):

@@ -23,6 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from .common import NEAR_FRACTION, bind, camera_uniforms, eye_view_projection, light_uniforms
+from .gpu import proxy_vao
 
 NO_SURFACE = 3e38     # t where a pixel's ray meets no surface
 
@@ -115,3 +116,17 @@ def surface_pass(renderer, scene):
     finally:
         ctx.disable(ctx.DEPTH_TEST)
     return target.tex
+
+
+def draw_surface_behind(renderer, surfaces):
+    """Write each pixel's first surface (``surfaces``: ``geometry.surface_pass``'s
+    texture) into the bound target, lit colour with opacity 1, before the slices or cells
+    are blended over it: the backmost layer. Pixels no surface covers are left as they are.
+    The slicing techniques and projected tetrahedra draw it."""
+    ctx = renderer.ctx
+    prog = renderer.programs.get("common/box_instances.vert", "geometry/surface_behind.frag", {})
+    surfaces.use(location=0)
+    prog["t_surface"].value = 0
+    prog["u_view_proj"].write(np.eye(4, dtype="f4").tobytes())
+    ctx.disable(ctx.BLEND | ctx.DEPTH_TEST | ctx.CULL_FACE)
+    proxy_vao(renderer, prog, "fullscreen").render(ctx.TRIANGLES)

@@ -50,6 +50,15 @@ Lighting (``Scene(shading=True)``): each particle carries the gradient at its ce
 mesh's particle, its cell's), computed once per set; a pixel's colour is the particle's
 colour lit with that gradient along the pixel's own ray (``shadeBlinnPhong``), so the
 averaged image converges to the lit emission-absorption integral.
+
+Opaque geometry (``Scene(geometry=[Surface, ...])``): a pass before the particles finds
+each pixel's first surface, its lit colour and its ray parameter t_hit
+(``techniques.geometry.surface_pass``). The rule is the clip rule's with t_hit as the kept
+interval's end: a particle counts on a pixel's ray where its centre's projection lies at
+``t <= t_hit`` (``GEOMETRY``, tested per fragment), so each ray sees the Poisson process
+over ``[0, t_hit]`` and the expected image is the contract's over the shortened ray. Each
+set's image then has the surface's colour composited behind it with opacity 1 (a pixel
+no particle covers shows the surface), before the sets are averaged.
 """
 
 from __future__ import annotations
@@ -67,6 +76,7 @@ from ..util.progress import Progress
 from ..model.scene import Scene
 from .common import (cleared_target, SizedTarget, bind, camera_uniforms, check_scene, check_target, clip_defines,
                      clip_uniforms, data_projection, point_shading_defines, sample_term_uniforms)
+from .geometry import surface_pass
 from .gpu import empty_vao
 
 POINT_SPRITES = True  # drawn as GL points, which are clipped by their centres (see Renderer.render)
@@ -140,6 +150,8 @@ def make_plan(scene, step=None, *, repetitions=1, seed=0, radius=None, sampler="
     defines = {"ORTHO": 1} if scene.camera.is_ortho else {}
     defines.update(point_shading_defines(scene))
     defines.update(clip_defines(scene))     # particles whose centre is clipped away are not drawn
+    if scene.geometry:
+        defines["GEOMETRY"] = 1             # particles behind the first surface are not drawn
     gradients = None
     if scene.shading:      # once per set, with the set
         gradients = [tables.get("particle_gradients", s, data, make=pbvr.particle_gradients) for s in sets]
@@ -175,37 +187,41 @@ def draw(renderer, plan):
     ctx = renderer.ctx
     scene = plan.scene
     fbo = cleared_target(renderer, scene, plan.target)
-    if plan.count == 0:
+    if plan.count == 0 and not scene.geometry:
         return fbo
+    surfaces = surface_pass(renderer, scene) if scene.geometry else None   # each pixel's first surface
     scratch = renderer.resources.for_objects("particles_scratch", make=lambda: SizedTarget(ctx, depth=True),
                                              capacity=1).get(*scene.target_size)
     prog = renderer.programs.get("particles/particles.vert", "particles/particles.frag", plan.defines)
-    average = renderer.programs.get("tetra/fullscreen.vert", "particles/average.frag")
+    average = renderer.programs.get("tetra/fullscreen.vert", "particles/average.frag",
+                                    {"GEOMETRY": 1} if surfaces is not None else {})
+    surface_textures = {} if surfaces is None else {"t_surface": surfaces}
     uniforms = {**camera_uniforms(scene), "u_radius": plan.radius, "u_pixels_per_unit": pixels_per_unit(scene),
                 "u_inv_far": 1.0 / far_distance(scene), "u_size_step": point_size_step(ctx), **clip_uniforms(scene)}
     if scene.shading:
         uniforms.update(sample_term_uniforms(renderer, scene, plan.defines))
-    bind(prog, {}, uniforms)
+    bind(prog, surface_textures, uniforms, first_unit=2)     # units 0, 1: the averaging pass's
     prog["u_view_proj"].write(data_projection(scene).astype("f4").tobytes())
     ctx.enable(ctx.PROGRAM_POINT_SIZE)
     for k, particle_set in enumerate(plan.sets):
-        if particle_set.count == 0:
+        if particle_set.count == 0 and surfaces is None:
             continue
         gradients = None if plan.gradients is None else plan.gradients[k]
-        vao = renderer.resources.for_objects("particles_vbo", particle_set, prog,
-                                             make=lambda s=particle_set, g=gradients: _Points(ctx, prog, s, g),
-                                             capacity=max(plan.repetitions, 2)).vao
         scratch.use()
         scratch.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
-        ctx.enable(ctx.DEPTH_TEST)
-        ctx.depth_func = "<"
-        vao.render(ctx.POINTS)
-        ctx.disable(ctx.DEPTH_TEST)
+        if particle_set.count > 0:
+            vao = renderer.resources.for_objects("particles_vbo", particle_set, prog,
+                                                 make=lambda s=particle_set, g=gradients: _Points(ctx, prog, s, g),
+                                                 capacity=max(plan.repetitions, 2)).vao
+            ctx.enable(ctx.DEPTH_TEST)
+            ctx.depth_func = "<"
+            vao.render(ctx.POINTS)
+            ctx.disable(ctx.DEPTH_TEST)
         fbo.use()
         ctx.enable(ctx.BLEND)
         ctx.blend_func = ctx.ONE, ctx.ONE
         ctx.blend_equation = ctx.FUNC_ADD
-        bind(average, {"t_image": scratch.color_attachments[0]}, {"u_weight": 1.0 / plan.repetitions})
+        bind(average, {"t_image": scratch.color_attachments[0], **surface_textures}, {"u_weight": 1.0 / plan.repetitions})
         empty_vao(renderer, average).render(ctx.TRIANGLES, vertices=3)
         ctx.disable(ctx.BLEND)
     ctx.disable(ctx.PROGRAM_POINT_SIZE)

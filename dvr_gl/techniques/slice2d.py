@@ -41,6 +41,14 @@ faces across the axis and the planes parallel to the slices): a face on a slice 
 keeps that slice for every pixel, as the box's own faces do, and only the slices it keeps
 are drawn.
 
+Opaque geometry (``Scene.geometry``): a pass before the slices finds each pixel's first
+surface and its lit colour (``techniques.geometry.surface_pass``); its colour is written
+into the target first, with opacity 1 (``geometry.draw_surface_behind``: the backmost
+layer under back-to-front blending), and each ray ends at its surface (``GEOMETRY``): a
+slice point behind it is no slice for that ray, the slab that straddles it runs to it
+(``range.y = min(range.y, t_hit)``), and the gap pass integrates a shortened chord that
+holds no slice, as for a clip.
+
 The stack switch: at 45 degrees two stacks are equally close and the image jumps between
 them; ``bench`` and the tests measure the jump (docs/notes/slicing.md has the numbers).
 
@@ -75,6 +83,7 @@ from .common import (cleared_target, add_optional_inputs, shading_defines, bind,
                      check_scene, check_target, clip_defines, clip_uniforms, eye_view_projection,
                      preintegration_table, tf_uniforms,
                      volume_uniforms)
+from .geometry import draw_surface_behind, surface_pass
 from .gpu import stream_vao, tf_texture
 
 INFLATE = 1e-3  # slice quads are grown by this fraction of the box diagonal
@@ -147,6 +156,8 @@ def make_plan(scene, step=None, *, target="rgba32f", interpolate=0, preintegrate
         defines["MASK_NONFINITE"] = 1
     defines.update(shading_defines(scene, gradients))
     defines.update(clip_defines(scene))
+    if scene.geometry:
+        defines["GEOMETRY"] = 1
     kept_slices = None
     if scene.clips:
         kept_slices = kept_slice_range(scene, axis, z)
@@ -214,6 +225,7 @@ def draw(renderer, plan):
     ctx = renderer.ctx
     scene = plan.scene
     volume = scene.volume
+    surfaces = surface_pass(renderer, scene) if scene.geometry else None   # each pixel's first surface
     prog = renderer.programs.get("common/slice_polygons.vert", "slice2d/slice2d.frag", plan.defines)
     u, v = plan.other_axes
     textures = {"t_stack": stack_texture(renderer, volume, plan.axis), "t_tf": tf_texture(renderer, plan.lut)}
@@ -224,7 +236,8 @@ def draw(renderer, plan):
     if plan.kept_slices is not None:
         uniforms["u_kept_slices"] = plan.kept_slices
     add_optional_inputs(renderer, plan, textures, uniforms)
-    bind(prog, textures, uniforms)
+    if surfaces is not None:
+        textures["t_surface"] = surfaces
 
     dmin, dmax = box_depth_range(scene)
     margin = 1e-3 * float(np.linalg.norm(volume.extent))
@@ -235,6 +248,9 @@ def draw(renderer, plan):
     prog["u_view_proj"].write(view_proj.astype("f4").tobytes())
 
     fbo = cleared_target(renderer, scene, plan.target)
+    if surfaces is not None:
+        draw_surface_behind(renderer, surfaces)
+    bind(prog, textures, uniforms)
     positions, indices = slice_quads(plan)
     ctx.disable(ctx.DEPTH_TEST | ctx.CULL_FACE)
     ctx.enable(ctx.BLEND)

@@ -28,6 +28,14 @@ range to its kept interval (``clipRange``) before anything else: the planes are 
 against that interval, the partial slabs run to its ends, and a ray whose kept part holds
 no plane goes through the gap pass.
 
+Opaque geometry (``Scene.geometry``): a pass before the slices finds each pixel's first
+surface and its lit colour (``techniques.geometry.surface_pass``); the surface colour is
+written into the target first, with opacity 1 (``geometry.draw_surface_behind``: under back-to-
+front blending it is the backmost layer), and every ray's kept interval ends at its
+surface (``GEOMETRY``: ``range.y = min(range.y, t_hit)``), exactly as a clip cuts it: the
+planes behind the surface are no planes for that ray, the slab that straddles it runs to
+it, and a ray whose shortened interval holds no plane goes through the gap pass.
+
 Coverage is decided by that per-fragment test, never by rasterisation: the polygons are
 cut from a box inflated by a small margin and fragments outside the true box are
 discarded. So the CPU and vertex-shader proxies, whose vertices round differently,
@@ -66,6 +74,7 @@ from .common import (cleared_target, add_optional_inputs, shading_defines, bind,
                      clip_defines, clip_uniforms,
                      check_step, check_target, inflated_corners, plane_projection, plane_triangles, preintegration_table,
                      tf_uniforms, volume_uniforms)
+from .geometry import draw_surface_behind, surface_pass
 from .gpu import empty_vao, stream_vao, tf_texture, volume_texture
 
 PROXIES = ("cpu", "vertex")
@@ -131,6 +140,8 @@ def make_plan(scene, step=None, *, target="rgba32f", proxy="cpu", shells=False, 
         defines["MASK_NONFINITE"] = 1
     defines.update(shading_defines(scene, gradients))
     defines.update(clip_defines(scene))
+    if scene.geometry:
+        defines["GEOMETRY"] = 1
     return Slice3DPlan(scene=scene, step=step, lut=lut, target=target, proxy=proxy, shells=shells,
                        preint=preint, far_depth=float(far_depth), count=int(count), defines=defines)
 
@@ -165,10 +176,16 @@ def draw(renderer, plan):
         vertex_shader = "common/slice_polygons.vert"
     prog = renderer.programs.get(vertex_shader, "slice3d/slice3d.frag", plan.defines)
 
+    surfaces = surface_pass(renderer, scene) if scene.geometry else None   # each pixel's first surface
     textures, uniforms = _inputs(renderer, plan)
+    if surfaces is not None:
+        textures["t_surface"] = surfaces
     bind(prog, textures, uniforms)
 
     fbo = cleared_target(renderer, scene, plan.target)
+    if surfaces is not None:
+        draw_surface_behind(renderer, surfaces)
+        bind(prog, textures, uniforms)
     ctx.disable(ctx.DEPTH_TEST | ctx.CULL_FACE)
     ctx.enable(ctx.BLEND)
     ctx.blend_func = ctx.ONE, ctx.ONE_MINUS_SRC_ALPHA

@@ -37,6 +37,15 @@ whose four points all lie outside one plane or beyond one face of the crop box a
 out of the draw (found once per mesh and clip, ``cells_kept``); the rest keep their
 order, which stays back to front. Unclipped scenes compile none of this.
 
+Opaque geometry (``Scene.geometry``). A pass before the cells finds each pixel's first
+surface, its lit colour and ray parameter t (``techniques.geometry.surface_pass``). Each
+fragment cuts its cell's segment at that t (``GEOMETRY`` in tetra.frag, as it cuts at the
+clip's kept interval: the end value follows from the cut end), so nothing behind the
+surface counts. Composite: the surface's colour is written into the target first, opaque
+(``geometry.draw_surface_behind``), and the cells blend over it back to front, giving
+``C + (1 - A) * lit``, ``A = 1``. mip, minip, average: the classify pass composites the
+surface behind the shortened ray's classified value.
+
 Options (same names in ``dvr_gl.reference.render``)
 ---------------------------------------------------
 sort : "mpvo" (default): visibility order exact at every pixel centre, non-convex
@@ -61,6 +70,7 @@ from ..model.scene import OPTICAL_MODELS, Scene
 from .common import (sample_term_uniforms, cleared_target, RepeatedIndices, SizedTarget, bind, camera_uniforms,
                      check_scene, check_target, clip_defines, clip_uniforms, data_projection, grow_pixels,
                      knot_uniforms)
+from .geometry import draw_surface_behind, surface_pass
 from .gpu import empty_vao
 
 MODES = ("composite", "mip", "minip", "average")
@@ -153,6 +163,8 @@ def make_plan(scene, step=None, *, sort="mpvo", target="rgba32f", tables=None):
         cells = _drop_clipped(scene, cells, tables)
         defines = {"KNOT_CAPACITY": knot_capacity(knots.count), f"MODE_{scene.mode.upper()}": 1,
                    "MODE_COMPOSITE": 0, **clip_defines(scene)}
+        if scene.geometry:
+            defines["GEOMETRY"] = 1
         if scene.camera.is_ortho:
             defines["ORTHO"] = 1
         return TetraPlan(scene=scene, knots=knots, visible=cells, order=Order(cells, 0, 0), draw=cells,
@@ -176,6 +188,8 @@ def make_plan(scene, step=None, *, sort="mpvo", target="rgba32f", tables=None):
     defines = {"KNOT_CAPACITY": knot_capacity(knots.count), **clip_defines(scene)}
     if scene.camera.is_ortho:
         defines["ORTHO"] = 1
+    if scene.geometry:
+        defines["GEOMETRY"] = 1
     if scene.optical_model != "emission_absorption":     # absorption (1) or emission (2) only
         defines["OPTICAL_MODEL"] = OPTICAL_MODELS.index(scene.optical_model)
     if scene.shading or scene.illustration:   # terms of each cell's own (constant) gradient
@@ -270,7 +284,11 @@ def draw(renderer, plan):
     mesh = scene.volume
     composite = scene.mode == "composite"
     fbo = cleared_target(renderer, scene, plan.target)
+    surfaces = surface_pass(renderer, scene) if scene.geometry else None   # each pixel's first surface
     if plan.draw.size == 0:
+        if surfaces is not None:      # the surfaces alone (an empty ray classifies to 0)
+            fbo.use()
+            draw_surface_behind(renderer, surfaces)
         return fbo
     prog = renderer.programs.get("tetra/tetra.vert", "tetra/tetra.frag", plan.defines)
     data = renderer.resources.for_objects("tetra_mesh", mesh, make=lambda: MeshTextures(ctx, mesh), capacity=1)
@@ -300,12 +318,16 @@ def draw(renderer, plan):
                                                          capacity=1).get(*scene.target_size)
     drawn.use()
     drawn.clear(-3.0e38 if scene.mode in ("mip", "minip") else 0.0, 0.0, 0.0, 0.0, depth=0.0)
+    if surfaces is not None and composite:    # the surface as the backmost layer
+        draw_surface_behind(renderer, surfaces)
     textures = {"t_order": order, "t_tets": data.tets, "t_points": data.points, "t_planes": data.planes,
                 "t_field": data.field, "t_outline01": outline.color_attachments[0],
                 "t_outline23": outline.color_attachments[1]}
     uniforms = {**camera_uniforms(scene), "u_knot_count": plan.knots.count, "u_inv_unit": plan.knots.inv_unit,
                 "u_target_size": scene.target_size,
                 "u_centre": data.centre, **clip_uniforms(scene)}
+    if surfaces is not None:
+        textures["t_surface"] = surfaces
     if scene.shading or scene.illustration:
         uniforms.update(sample_term_uniforms(renderer, scene, plan.defines))
     bind(prog, textures, uniforms)
@@ -343,9 +365,12 @@ def draw(renderer, plan):
     if not composite:
         classify = renderer.programs.get("tetra/fullscreen.vert", "tetra/tetra_classify.frag",
                                          {k: v for k, v in plan.defines.items()
-                                          if k in ("KNOT_CAPACITY", "MODE_MINIP", "MODE_AVERAGE")})
+                                          if k in ("KNOT_CAPACITY", "MODE_MINIP", "MODE_AVERAGE", "GEOMETRY")})
         fbo.use()
-        bind(classify, {"t_reduced": reduced.color_attachments[0]}, {"u_knot_count": plan.knots.count})
+        classify_textures = {"t_reduced": reduced.color_attachments[0]}
+        if surfaces is not None:
+            classify_textures["t_surface"] = surfaces
+        bind(classify, classify_textures, {"u_knot_count": plan.knots.count})
         knot_uniforms(classify, plan.knots, plan.defines["KNOT_CAPACITY"])
         empty_vao(renderer, classify).render(ctx.TRIANGLES, vertices=3)
     return fbo

@@ -12,6 +12,10 @@
 #define SHADING 0
 #endif
 
+#ifndef GEOMETRY
+#define GEOMETRY 0        // opaque surfaces end the rays: particles behind them do not count
+#endif
+
 #include "common/camera_ray.glsl"
 #include "common/clip.glsl"
 #if SHADING
@@ -24,6 +28,9 @@ flat in vec3 v_color;
 
 uniform float u_radius;
 uniform float u_inv_far;       // 1 / a distance beyond every particle: depth in [0, 1]
+#if GEOMETRY
+uniform sampler2D t_surface;   // per pixel: the first surface's lit colour and its t (3e38: none)
+#endif
 
 out vec4 frag_color;
 
@@ -42,6 +49,11 @@ void main() {
     // lies in the ray's kept part (techniques/particles.py)
     vec2 kept = clipRange(origin, dir, vec2(0.0, 1.0 / 0.0));
     if (t < kept.x || t > kept.y) discard;
+#endif
+#if GEOMETRY
+    // the ray ends at its first surface: a particle counts where its centre's projection
+    // lies in front of it, the clip rule with t_hit as the kept interval's end
+    if (t > texelFetch(t_surface, ivec2(gl_FragCoord.xy), 0).a) discard;
 #endif
     gl_FragDepth = clamp(max(t - half_chord, 0.0) * u_inv_far, 0.0, 1.0);
 #if SHADING

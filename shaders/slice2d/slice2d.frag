@@ -15,6 +15,9 @@
 #ifndef SAMPLE_TERMS
 #define SAMPLE_TERMS 0
 #endif
+#ifndef GEOMETRY
+#define GEOMETRY 0        // opaque surfaces end the rays (their colour is drawn first)
+#endif
 
 #include "common/camera_ray.glsl"
 #include "common/ray_box.glsl"
@@ -36,6 +39,26 @@ uniform float u_inv_unit;        // 1 / transfer-function unit distance
 
 flat in int v_slice;
 out vec4 f_color;
+
+#if GEOMETRY
+uniform sampler2D t_surface;  // per pixel: the first surface's lit colour and its ray
+                              // parameter t (3e38: none), techniques.geometry.surface_pass
+
+// The ray parameter of this pixel's first surface: the ray ends there.
+float surfaceT() {
+    return texelFetch(t_surface, ivec2(gl_FragCoord.xy), 0).a;
+}
+#endif
+
+// The ray's kept interval, ended at its first surface (an empty range where the surface
+// is in front of it).
+vec2 rayRange(vec3 origin, vec3 dir) {
+    vec2 range = clipRange(origin, dir, intersectBox(origin, dir, vec3(0.0), u_extent));
+#if GEOMETRY
+    range.y = min(range.y, surfaceT());
+#endif
+    return range;
+}
 
 // Ray distance of slice j's plane. Neighbours call this with j +- 1 and get exactly what
 // that slice's own fragments compute, so slabs tile the ray without gaps.
@@ -72,6 +95,9 @@ bool clipKeeps(int j, vec3 p) {
 // clip planes or a crop box, the point (on the slice's own plane) must also be kept.
 bool sliceInside(int j, float t, vec3 origin, vec3 dir, float cos_theta) {
     if (j < 0 || j >= u_slice_count || t * cos_theta < u_min_depth) return false;
+#if GEOMETRY
+    if (t > surfaceT()) return false;   // behind the pixel's surface
+#endif
     vec3 p = origin + t * dir;
     float pu = p[u_axes.y], pv = p[u_axes.z];
 #if N_CLIP_PLANES > 0 || CROP_BOX
@@ -135,7 +161,7 @@ void main() {
     vec3 origin, dir;
     pixelRay(origin, dir);
     if (dir[u_axes.x] == 0.0) discard;  // parallel to the slices
-    vec2 range = clipRange(origin, dir, intersectBox(origin, dir, vec3(0.0), u_extent));
+    vec2 range = rayRange(origin, dir);
     float cos_theta = dot(dir, u_forward);
     int j = v_slice;
     float t = sliceT(j, origin, dir);
@@ -199,7 +225,7 @@ vec4 segmentColor(vec3 origin, vec3 dir, float a, float b) {
 void main() {
     vec3 origin, dir;
     pixelRay(origin, dir);
-    vec2 range = clipRange(origin, dir, intersectBox(origin, dir, vec3(0.0), u_extent));
+    vec2 range = rayRange(origin, dir);
     if (!(range.y > range.x)) discard;
     float cos_theta = dot(dir, u_forward);
     // the slice planes the chord spans along the stack axis; more than two between its

@@ -15,6 +15,9 @@
 #ifndef SAMPLE_TERMS
 #define SAMPLE_TERMS 0
 #endif
+#ifndef GEOMETRY
+#define GEOMETRY 0        // opaque surfaces end the rays (their colour is drawn first)
+#endif
 
 #include "common/camera_ray.glsl"
 #include "common/ray_box.glsl"
@@ -34,6 +37,21 @@ uniform float u_inv_unit;     // 1 / transfer-function unit distance
 
 flat in int v_slice;
 out vec4 f_color;
+
+#if GEOMETRY
+uniform sampler2D t_surface;  // per pixel: the first surface's lit colour and its ray
+                              // parameter t (3e38: none), techniques.geometry.surface_pass
+#endif
+
+// The ray's kept interval, ended at its first surface (an empty range where the surface
+// is in front of it): slices beyond are no slices for this ray, slabs run to it.
+vec2 rayRange(vec3 origin, vec3 dir) {
+    vec2 range = clipRange(origin, dir, intersectBox(origin, dir, vec3(0.0), u_extent));
+#if GEOMETRY
+    range.y = min(range.y, texelFetch(t_surface, ivec2(gl_FragCoord.xy), 0).a);
+#endif
+    return range;
+}
 
 #if !PREINTEGRATE
 vec4 segmentColor(vec3 origin, vec3 dir, float a, float b) {
@@ -60,7 +78,7 @@ vec4 segmentColor(vec3 origin, vec3 dir, float a, float b) {
 void main() {
     vec3 origin, dir;
     pixelRay(origin, dir);
-    vec2 range = clipRange(origin, dir, intersectBox(origin, dir, vec3(0.0), u_extent));
+    vec2 range = rayRange(origin, dir);
     float cos_theta = dot(dir, u_forward);
     int k = v_slice;
     float t = sliceT(k, cos_theta);
@@ -92,7 +110,7 @@ void main() {
 void main() {
     vec3 origin, dir;
     pixelRay(origin, dir);
-    vec2 range = clipRange(origin, dir, intersectBox(origin, dir, vec3(0.0), u_extent));
+    vec2 range = rayRange(origin, dir);
     if (!(range.y > range.x)) discard;
     float cos_theta = dot(dir, u_forward);
 #if SHELLS

@@ -29,6 +29,9 @@
 #ifndef SAMPLE_TERMS
 #define SAMPLE_TERMS 0   // lights or illustration terms, each constant in a cell
 #endif
+#ifndef GEOMETRY
+#define GEOMETRY 0       // opaque surfaces: nothing of a cell behind the pixel's first one
+#endif
 
 #include "common/camera_ray.glsl"
 #include "common/linear_segment.glsl"
@@ -44,6 +47,10 @@ flat in vec4 v_room;           // plane offsets from the eye: d - n . eye
 flat in vec4 v_field;          // gradient of the linear field, value at the eye
 flat in vec2 v_range;          // the cell's smallest and largest vertex value
 uniform vec3 u_centre;          // the mean of the mesh's points (relative to its lower corner)
+#if GEOMETRY
+uniform sampler2D t_surface;    // per pixel: the first surface's lit colour and its ray
+                                // parameter t (3e38: none), techniques.geometry.surface_pass
+#endif
 
 out vec4 frag_color;
 
@@ -95,6 +102,12 @@ void main() {
     t_in = kept.x;
     t_out = kept.y;
     if (t_out <= t_in) discard;      // nothing of this cell is kept on this ray
+#endif
+#if GEOMETRY
+    // nothing behind the pixel's first surface: the segment cut at its t, the end value
+    // below following from the cut end (the surface itself is the target's backmost layer)
+    t_out = min(t_out, texelFetch(t_surface, ivec2(gl_FragCoord.xy), 0).a);
+    if (t_out <= t_in) discard;
 #endif
     float rate = dot(v_field.xyz, dir);
     float s_at_start = v_field.w + dot(v_field.xyz, offset);

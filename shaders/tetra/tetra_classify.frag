@@ -9,17 +9,35 @@
 #ifndef MODE_AVERAGE
 #define MODE_AVERAGE 0
 #endif
+#ifndef GEOMETRY
+#define GEOMETRY 0      // the pixel's first surface composited behind the classified value
+#endif
 
 #include "common/linear_segment.glsl"
 
 uniform sampler2D t_reduced;   // (value or integral, length, 0, covered)
+#if GEOMETRY
+uniform sampler2D t_surface;   // the first surface's lit colour and t (3e38: none)
+#endif
 out vec4 frag_color;
+
+vec4 classified(vec4 r);
 
 void main() {
     vec4 r = texelFetch(t_reduced, ivec2(gl_FragCoord.xy), 0);
-    if (r.a <= 0.0) { frag_color = vec4(0.0); return; }
+    frag_color = classified(r);
+#if GEOMETRY
+    // the surface under the over operator: C + (1 - A) colour, A = 1 (contract)
+    vec4 surface = texelFetch(t_surface, ivec2(gl_FragCoord.xy), 0);
+    if (surface.a < 1e38) frag_color = vec4(frag_color.rgb + (1.0 - frag_color.a) * surface.rgb, 1.0);
+#endif
+}
+
+// the reduced value r classified with the transfer function (0 where no cell was met)
+vec4 classified(vec4 r) {
+    if (r.a <= 0.0) return vec4(0.0);
 #if MODE_AVERAGE
-    if (r.g <= 0.0) { frag_color = vec4(0.0); return; }
+    if (r.g <= 0.0) return vec4(0.0);
     float s = r.r / r.g;
 #elif MODE_MINIP
     float s = -r.r;
@@ -30,5 +48,5 @@ void main() {
     vec3 c;
     float a, w;
     knotLine(j, s, c, a, w);
-    frag_color = vec4(c * a, a);
+    return vec4(c * a, a);
 }
