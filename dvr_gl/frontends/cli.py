@@ -30,7 +30,7 @@ from .. import formats as dvr_io
 from .isosurface import add_isosurface_parser, cmd_isosurface
 from .inputs import PRESETS  # presets and bundled data sets are shared with the viewer and dvr_gl.render
 from .options import (MESH_TECHNIQUES, OPTION_OF_FIELD, UsageError, _check_input_options, _origin, _shape,
-                      _spacing, add_orientation_option, add_render_options, check_png, check_technique, clip_args,
+                      _spacing, add_orientation_option, add_render_options, check_dtype_option, check_png, check_technique, clip_args,
                       geometry_args, input_is_mesh, load_input_args, resolve_tf_option, technique_options)
 
 PROG = "dvr-gl"
@@ -151,11 +151,7 @@ def cmd_info_file(args, out=None):
     """``info FILE``: what a volume or mesh file holds (no GL)."""
     out = out or sys.stdout
     args.input = args.file
-    if args.dtype is not None:
-        try:
-            dvr_io._parse_dtype(args.dtype)
-        except dvr_io.InputError as e:
-            raise UsageError("--dtype", e.detail) from None
+    check_dtype_option(args)
     mesh = input_is_mesh(args)
     _check_input_options(args, mesh)
     data, preset = load_input_args(args)
@@ -281,11 +277,7 @@ def cmd_render(args, out=None):
         raise UsageError("--light", "is only used with --shading (or --mode isosurface)")
     if args.light and len(args.light) > 4:
         raise UsageError("--light", f"at most 4 lights, got {len(args.light)}")
-    if args.dtype is not None:
-        try:
-            dvr_io._parse_dtype(args.dtype)
-        except dvr_io.InputError as e:
-            raise UsageError("--dtype", e.detail) from None
+    check_dtype_option(args)
 
     t0 = time.perf_counter()
     volume, default_preset = load_input_args(args)

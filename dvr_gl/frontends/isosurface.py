@@ -19,8 +19,8 @@ import time
 
 from .. import formats as dvr_io
 from ..formats.surfaces import surface_format
-from .options import (UsageError, _check_input_options, _number, _origin, _shape, _spacing,
-                      add_orientation_option, input_is_mesh, load_input_args)
+from .options import (UsageError, _check_input_options, _number, add_raw_options, check_dtype_option, input_is_mesh,
+                      load_input_args)
 
 
 def add_isosurface_parser(sub):
@@ -37,15 +37,7 @@ def add_isosurface_parser(sub):
                    help=f"the file to write; its extension names the format: {', '.join(dvr_io.SURFACE_FORMATS)}")
     s.add_argument("--scalars", metavar="NAME",
                    help="mesh inputs: the point array to contour (default: the first scalar array)")
-    raw = s.add_argument_group("raw and overriding geometry")
-    raw.add_argument("--shape", type=_shape, metavar="NZ,NY,NX", help="sample counts of a raw file, z slowest")
-    raw.add_argument("--dtype", metavar="D", help="sample type of a raw file: uint8, int16, <f4, >u2, ...")
-    raw.add_argument("--spacing", type=_spacing, metavar="SX,SY,SZ",
-                     help="sample spacing (required for raw files; replaces the file's otherwise)")
-    raw.add_argument("--origin", type=_origin, metavar="OX,OY,OZ", help="world position of the first sample")
-    add_orientation_option(raw)
-    raw.add_argument("--mask-nonfinite", action="store_true",
-                     help="treat NaN and inf samples as outside the volume (their cells give no triangles)")
+    add_raw_options(s, mask_help="treat NaN and inf samples as outside the volume (their cells give no triangles)")
     return s
 
 
@@ -66,11 +58,7 @@ def cmd_isosurface(args, out=None):
     """Run ``dvr-gl isosurface``; returns the exit status."""
     out = out or sys.stdout
     check_surface_path(args.out)
-    if args.dtype is not None:
-        try:
-            dvr_io._parse_dtype(args.dtype)
-        except dvr_io.InputError as e:
-            raise UsageError("--dtype", e.detail) from None
+    check_dtype_option(args)
     mesh = input_is_mesh(args)
     _check_input_options(args, mesh)
 

@@ -44,7 +44,7 @@ from ..formats import InputError
 from ..model.series import VolumeSeries
 from ..util.files import atomic_path
 from ..formats.series import is_pattern
-from .options import (UsageError, _number, _positive, add_render_options, check_technique, clip_args,
+from .options import (UsageError, _number, _positive, add_render_options, check_dtype_option, check_technique, clip_args,
                       geometry_args, technique_options, whole_number)
 
 #: frames of an orbit when not given: five seconds at 24 fps
@@ -380,11 +380,7 @@ def cmd_movie(args, out=None):
         raise UsageError("--iso", f"is only used with --mode isosurface, not --mode {mode}")
     if args.light and len(args.light) > 4:
         raise UsageError("--light", f"at most 4 lights, got {len(args.light)}")
-    if args.dtype is not None:
-        try:
-            dvr_io._parse_dtype(args.dtype)
-        except InputError as e:
-            raise UsageError("--dtype", e.detail) from None
+    check_dtype_option(args)
 
     data, preset = load_movie_input(args.input, scalars=args.scalars, shape=args.shape, dtype=args.dtype,
                                     spacing=args.spacing, origin=args.origin, mask_nonfinite=args.mask_nonfinite,

@@ -183,6 +183,30 @@ def _light(text):
 
 # ----------------------------------------------------------------------------- the render options
 
+def add_raw_options(parser, mask_help="treat NaN and inf samples as outside the volume instead of rejecting "
+                                         "them"):
+    """The options that describe a raw file or override a file's geometry: --shape,
+    --dtype, --spacing, --origin, --orientation, --mask-nonfinite."""
+    raw = parser.add_argument_group("raw and overriding geometry")
+    raw.add_argument("--shape", type=_shape, metavar="NZ,NY,NX", help="sample counts of a raw file, z slowest")
+    raw.add_argument("--dtype", metavar="D", help="sample type of a raw file: uint8, int16, <f4, >u2, ...")
+    raw.add_argument("--spacing", type=_spacing, metavar="SX,SY,SZ",
+                     help="sample spacing (required for raw files; replaces the file's otherwise)")
+    raw.add_argument("--origin", type=_origin, metavar="OX,OY,OZ", help="world position of the first sample")
+    add_orientation_option(raw)
+    raw.add_argument("--mask-nonfinite", action="store_true", help=mask_help)
+    return raw
+
+
+def check_dtype_option(args):
+    """A --dtype that names no sample type is a UsageError, before anything is read."""
+    if getattr(args, "dtype", None) is not None:
+        try:
+            dvr_io._parse_dtype(args.dtype)
+        except dvr_io.InputError as e:
+            raise UsageError("--dtype", e.detail) from None
+
+
 def add_render_options(r):
     """The options shared by ``render`` and ``view``: the input, its geometry, the transfer
     function, the technique and its options, the mode, the camera and the image size."""
@@ -287,15 +311,7 @@ def add_render_options(r):
                    help="composite over this colour (components in [0, 1]); render: default white "
                         "(black for --optical-model emission), RGB unless --transparent; view: the "
                         "window's first background, screenshots RGBA unless given")
-    raw = r.add_argument_group("raw and overriding geometry")
-    raw.add_argument("--shape", type=_shape, metavar="NZ,NY,NX", help="sample counts of a raw file, z slowest")
-    raw.add_argument("--dtype", metavar="D", help="sample type of a raw file: uint8, int16, <f4, >u2, ...")
-    raw.add_argument("--spacing", type=_spacing, metavar="SX,SY,SZ",
-                     help="sample spacing (required for raw files; replaces the file's otherwise)")
-    raw.add_argument("--origin", type=_origin, metavar="OX,OY,OZ", help="world position of the first sample")
-    add_orientation_option(raw)
-    raw.add_argument("--mask-nonfinite", action="store_true",
-                     help="treat NaN and inf samples as outside the volume instead of rejecting them")
+    add_raw_options(r)
     r.add_argument("--backend", choices=("auto", "egl", "osmesa"), default="auto",
                    help="headless GL backend (default: auto, EGL then OSMesa)")
 

@@ -12,7 +12,6 @@ import argparse
 import os
 from dataclasses import dataclass, field
 
-from ... import formats as dvr_io
 from ...model.mesh import TetMesh
 
 PROG = "dvr-gl view"
@@ -100,7 +99,7 @@ def build_parser():
 def settings_from_args(args) -> Settings:
     """Check the options and load the input (no window yet): a bad file fails here."""
     from ..options import UsageError, check_png, check_technique, load_input_args, resolve_tf_option, \
-        technique_options, clip_args, geometry_args
+        technique_options, clip_args, geometry_args, check_dtype_option
 
     screenshot, option = (args.screenshot, "--screenshot") if args.screenshot else (args.out, "--out")
     if screenshot:
@@ -114,11 +113,7 @@ def settings_from_args(args) -> Settings:
     mode = args.mode or ("isosurface" if args.iso is not None else "composite")
     if args.iso is not None and mode != "isosurface":
         raise UsageError("--iso", f"is only used with --mode isosurface, not --mode {mode}")
-    if args.dtype is not None:
-        try:
-            dvr_io._parse_dtype(args.dtype)
-        except dvr_io.InputError as e:
-            raise UsageError("--dtype", e.detail) from None
+    check_dtype_option(args)
     if not args.tf_out.lower().endswith(".json"):
         raise UsageError("--tf-out", f"must name a .json file, got {args.tf_out!r}")
     volume, default_preset = load_input_args(args)
