@@ -1,7 +1,7 @@
 """dvr_gl: direct volume rendering with OpenGL, headless on llvmpipe or on a GPU,
 checked against NumPy references and an exact float64 integrator."""
 
-from .model import Camera, Light, Scene, Surface, TetMesh, TransferFunction, TransferFunction2D, Volume, default_camera
+from .model import Camera, LabelColors, Layer, Light, Scene, Surface, TetMesh, TransferFunction, TransferFunction2D, Volume, default_camera
 
 from ._version import __version__
 
@@ -9,7 +9,7 @@ from . import _compat
 
 _compat.install()
 
-__all__ = ["Camera", "Light", "Renderer", "Scene", "Surface", "TetMesh", "TransferFunction", "TransferFunction2D", "Volume", "default_camera",
+__all__ = ["Camera", "LabelColors", "Layer", "Light", "Renderer", "Scene", "Surface", "TetMesh", "TransferFunction", "TransferFunction2D", "Volume", "default_camera",
            "metrics", "reference", "render", "__version__"]
 
 

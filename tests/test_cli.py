@@ -132,7 +132,7 @@ BAD = [
     (["--no-shading", "--gradients", "texture"], "--gradients", "only used with --shading"),
     (["--illustration", "halo"], "argument --illustration", "'halo'"),
     (["--tolerance", "1e-3", "--step", "1"], "--tolerance", "leave out --step"),
-    (["--tolerance", "1e-3", "--technique", "slice3d"], "--tolerance", "raycast only, not slice3d"),
+    (["--tolerance", "1e-3", "--technique", "slice3d"], "--tolerance", "raycast or tetra only, not slice3d"),
     (["--illustration", "tone", "--mode", "mip"], "--illustration", "not --mode mip"),
     (["--illustration", "boundary", "--preintegrate"], "--illustration", "leave out --preintegrate"),
     (["--gradients", "sobel"], "argument --gradients", "'sobel'"),
@@ -590,12 +590,12 @@ def test_mesh_bench_quick_run(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "Shirley-Tuchman classification on the CPU" in out and "ball" in out
     rows = {r["renderer"]: r for r in csv.DictReader(open(tmp_path / "m.csv"))}
-    assert set(rows) == {"dvr_gl tetra mpvo", "dvr_gl tetra centroid", "VTK projected tetrahedra"}
+    assert set(rows) == {"dvr_gl tetra mpvo", "dvr_gl tetra centroid", "dvr_gl tetra walk", "VTK projected tetrahedra"}
     assert float(rows["dvr_gl tetra mpvo"]["rmse"]) < 1e-4
     assert float(rows["dvr_gl tetra mpvo"]["rmse"]) < float(rows["VTK projected tetrahedra"]["rmse"])
     assert float(rows["dvr_gl tetra mpvo"]["ms_median"]) > 0
     doc = json.load(open(tmp_path / "m.json"))
-    assert doc["info"]["cpu_classify_ms"]["ball"] > 0 and len(doc["rows"]) == 3
+    assert doc["info"]["cpu_classify_ms"]["ball"] > 0 and len(doc["rows"]) == 4
     assert (tmp_path / "m.png").stat().st_size > 0
 
 

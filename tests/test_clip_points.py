@@ -11,8 +11,8 @@ What clipping means (the module docstrings have the reasons):
   ray then sees the Poisson process restricted to its kept interval: the expected image
   is the clipped contract, with no bias of its own at a cut.
 - tent splats: each sheet's piece of the ray is cut to the kept part (as 3D slicing's).
-  The first piece behind a cut is classified at its sheet, up to half a step from its
-  middle: a first-order error at cuts through opaque tissue (below).
+  The first piece behind a cut (and the last before one) takes the field at its middle,
+  up to half a step from its sheet (below).
 - Gaussian splats: a kernel counts by its part in the ray's kept range (an erf along the
   ray, in closed form); kernels whose cutoff sphere misses the kept region are dropped.
 """
@@ -221,35 +221,28 @@ def test_error_against_clipped_exact_stays_within_the_unclipped_error(renderer, 
 
 @pytest.mark.parametrize("name", ["plane", "two planes", "crop box"])
 def test_tent_error_against_clipped_exact(renderer, name):
-    """CT head, 48x48, density 1. The tent's sheets carry the field only on the sheets, so
-    the first piece of a ray behind a cut (and the last before one) is classified at its
-    sheet, up to half a step from the piece's middle: where a cut lays opaque tissue bare
-    that is a first-order error, which the ray caster (sampling the kept interval afresh)
-    does not make. Measured ratios of the clipped to the unclipped error: 0.95 and 0.64
-    with one and two planes, 1.012 with the crop box (the head's cut faces are every
-    covered pixel's entry); at density 2 the crop box's is 0.94.
-
-    The bound asserted, derived: ``mid``, the midpoint rule on the same sheets (3D
-    slicing's twin at the sheets' step, which classifies every piece at its middle and so
-    differs from the tent's twin only in the end pieces), stays within the unclipped
-    error; by the triangle inequality the tent's error is then at most the unclipped error
-    plus the end pieces' share, RMSE(tent twin, mid), plus GL's distance from its twin.
-    Measured at the crop box: 0.001490 against 0.001472 + 0.001047 + 0.000001. With a
-    plane the direct rule holds and is asserted."""
+    """CT head, 48x48, density 1. The tent's sheets carry the field only on the sheets,
+    and the first piece of a ray behind a cut (or the last before one) lies up to half a
+    step off its sheet's centre: classified at the sheet, that was a first-order error
+    where a cut lays opaque tissue bare (ratio 1.012 with the crop box, whose cut faces are
+    every covered pixel's entry). Such a piece takes the field at its middle instead (as
+    3D slicing samples it), and the ratios of the clipped to the unclipped error are 0.79
+    and 0.62 with one and two planes, 0.85 with the crop box (density 2: 0.86, 0.57,
+    0.78): within the unclipped error, as asserted. The crop box lies inside the data's
+    box, so every ray it keeps enters and leaves through cuts: the tent's twin is then 3D
+    slicing's twin at the sheets' step (the midpoint rule on the same pieces) to float64
+    rounding (measured RMSE 6e-16)."""
     scene = _head_scenes(48)[name]
     plain = unclipped(scene)
     exact = reference.exact(scene)
     gl = renderer.render(scene, technique="splat")
-    twin = reference.render(scene, technique="splat")
     err = metrics.rmse(gl, exact)
     err_unclipped = metrics.rmse(renderer.render(plain, technique="splat"), reference.exact(plain))
-    mid = reference.render(scene, technique="slice3d", step=splat.make_plan(scene).step)
-    assert metrics.rmse(mid, exact) <= err_unclipped
-    ends = metrics.rmse(twin, mid)
-    assert err <= err_unclipped + ends + metrics.rmse(gl, twin), (err, err_unclipped, ends)
-    if name != "crop box":
-        assert err <= err_unclipped, (err, err_unclipped)
+    assert err <= err_unclipped, (err, err_unclipped)
     assert metrics.rmse(gl, reference.exact(plain)) > 5 * err
+    if name == "crop box":
+        mid = reference.render(scene, technique="slice3d", step=splat.make_plan(scene).step)
+        assert metrics.rmse(reference.render(scene, technique="splat"), mid) < 1e-12
 
 
 # -- the small hard case: a constant box cut obliquely and cropped --------------------------

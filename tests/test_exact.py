@@ -13,6 +13,7 @@ from dvr_gl.reference.common import ray_box
 
 # import the module itself (the package also exports a function named ``exact``)
 ex = importlib.import_module("dvr_gl.reference.exact")
+one = importlib.import_module("dvr_gl.reference.exact_one")   # the one-volume integrator's internals
 
 
 def render(scene, **kw):
@@ -260,7 +261,7 @@ def test_isosurface_hit_position_vs_1d_closed_form():
     o, d, t0, t1 = rays_of(scene)
     hit = np.flatnonzero(t1 > t0)
     n_hits = 0
-    th = ex._Exact(scene).isosurface(o[hit], d[hit], t0[hit], t1[hit])
+    th = one._Exact(scene).isosurface(o[hit], d[hit], t0[hit], t1[hit])
     for k, r in enumerate(hit):
         x_in, x_out = o[r, 0] + t0[r] * d[r, 0], o[r, 0] + t1[r] * d[r, 0]
         xr = first_crossing_1d(PROFILE, PROF_SX, x_in, x_out, v)
@@ -333,7 +334,7 @@ def test_isosurface_touch_is_not_a_crossing_and_entry_on_value():
     down = Volume(np.broadcast_to(np.array([0.5, 0.2, 0.9]), (2, 2, 3)).copy())
     scene = Scene(down, tf, cam, 2, 2, mode="isosurface", iso_value=0.5)
     o, d, t0, t1 = rays_of(scene)
-    th = ex._Exact(scene).isosurface(o, d, t0, t1)
+    th = one._Exact(scene).isosurface(o, d, t0, t1)
     np.testing.assert_allclose(th, t0, rtol=0, atol=1e-14)
 
 
@@ -423,7 +424,7 @@ def test_masked_nan_cells_contribute_nothing():
     scene = Scene(Volume(gap, spacing=(sx, 1.0, 1.0), mask_nonfinite=True), tf, cam, 2, 2,
                   mode="isosurface", iso_value=0.5)
     o, d, t0, t1 = rays_of(scene)
-    th = ex._Exact(scene).isosurface(o, d, t0, t1)
+    th = one._Exact(scene).isosurface(o, d, t0, t1)
     np.testing.assert_allclose(o[:, 0] + th * d[:, 0], 3 * sx, rtol=0, atol=1e-14)
 
 
@@ -437,7 +438,7 @@ def test_cache_round_trip(tmp_path, monkeypatch):
     def fail(_scene):
         raise AssertionError("should have been loaded from the cache")
 
-    monkeypatch.setattr(ex, "_render", fail)
+    monkeypatch.setattr(ex, "render_one", fail)
     second = ex.exact(scene, cache_dir=tmp_path)
     assert second.dtype == np.float64 and second.shape == (4, 5, 4)
     assert np.array_equal(first, second) and first[..., 3].max() > 0.1
@@ -489,8 +490,8 @@ def test_pieces_never_skip_a_grid_plane(tilt):
         o, d, t0, t1 = rays_of(scene)
         assert np.all(t1 - t0 > 100.0)
         vol = scene.volume
-        e = ex._Exact(scene)
-        for M in (ex._WINDOW["composite"], ex._WINDOW["other"]):
+        e = one._Exact(scene)
+        for M in (one._WINDOW["composite"], one._WINDOW["other"]):
             got = [[] for _ in t0]
 
             def step(a, P):

@@ -485,7 +485,7 @@ def test_mesh_cache_round_trip(tmp_path, monkeypatch):
     def fail(_scene):
         raise AssertionError("should have been loaded from the cache")
 
-    monkeypatch.setattr(ex, "_render", fail)
+    monkeypatch.setattr(ex, "render_one", fail)
     second = ex.exact(scene, cache_dir=tmp_path)
     assert np.array_equal(first, second) and first[..., 3].max() > 0.1
     # another field on the same geometry is another key

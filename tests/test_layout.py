@@ -39,7 +39,7 @@ EXACT_MAY_IMPORT = ("dvr_gl.model", "dvr_gl.util", "dvr_gl.reference.exact", "dv
 # Modules over MAX_LINES, each one idea that would read worse cut in two.
 MAX_LINES = 600
 ONE_IDEA = {
-    "dvr_gl.reference.exact": "the exact integrator of the contract, grids and meshes",
+    "dvr_gl.reference.exact_one": "the exact integrator of the contract, grids and meshes",
     "dvr_gl.model.preintegration": "the pre-integration table and its error bounds",
     "dvr_gl.techniques.splat": "splatting: its two kernels share the plan, sheets and drawing",
     "dvr_gl.bench.vtk_peer": "the same scene through VTK",

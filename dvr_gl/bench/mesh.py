@@ -10,7 +10,8 @@ Per data set and renderer:
 - frame time at ``--size`` (default 512) for a *new view each frame* (the camera turns by
   0.5 degree between frames, so both renderers sort again every frame, as a user turning
   the mesh sees it), median of ``--repeats`` frames after one warm-up; each frame ends
-  with the float image read back. dvr_gl's frame is split into its parts: the visibility
+  with the float image read back. dvr_gl's sorts take their frames in turn, view by view
+  (a change in the machine's load falls on all of them alike). dvr_gl's frame is split into its parts: the visibility
   sort (CPU, ``sort ms``) and projection + draw + read-back (GPU, ``draw ms``);
 - RMSE, largest error and PSNR against ``reference.exact`` at ``--error-size`` (default
   128), with the same camera.
@@ -19,7 +20,9 @@ Per data set also: the time of Shirley and Tuchman's classification of the visib
 in NumPy (``dvr_gl.techniques.shirley_tuchman``), the CPU alternative to the per-fragment clipping
 that ``tetra`` does on the GPU (printed after the table, in the JSON info).
 
-Renderers: dvr_gl ``tetra`` with ``sort="mpvo"`` and with ``sort="centroid"``, and VTK's
+Renderers: dvr_gl ``tetra`` with ``sort="mpvo"``, with ``sort="centroid"`` and with
+``sort="walk"`` (no sort: each pixel's ray walked cell to cell on the GPU, its ``sort ms``
+is the plan's CPU time; ``passes`` its layers of depth peeling), and VTK's
 projected tetrahedra (its default cell-centre depth sort); VTK is left out when it is
 not installed. ``t/VTK`` and ``err/VTK`` divide by VTK's row of the same data set.
 """
@@ -38,33 +41,36 @@ from .common import error_axes, figure_bytes, fmt, load_mesh_dataset, machine_in
 
 CSV_FIELDS = ["dataset", "tets", "drawn", "renderer", "width", "sort_ms", "draw_ms", "ms_median", "ms_min",
               "error_size", "rmse", "max_abs", "psnr", "time_vs_vtk", "rmse_vs_vtk", "cycles_broken",
-              "gap_constraints"]
+              "gap_constraints", "walk_passes"]
 
 
 def _camera(mesh, turn=0.0):
     return default_camera(mesh, azimuth=30.0 + turn, elevation=20.0)
 
 
-def _time_dvr_gl(gl, scene, sort, repeats, on_frame):
-    """Median (sort, draw + read-back, total) seconds over frames each from a new view."""
+def _time_dvr_gl_sorts(gl, scene, sorts, repeats, on_frame):
+    """Median (sort, draw + read-back) seconds and every frame's total, for frames each
+    from a new view, the sorts taking their frames in turn (each view drawn by every sort
+    before the camera turns on), so that a change in the machine's load falls on all of
+    them alike: {sort: (last plan, sort s, draw s, totals)}."""
     from ..techniques import tetra
-    sorts, draws, totals = [], [], []
-    image = None
+    parts = {sort: ([], [], []) for sort in sorts}
+    plans = {}
     for i in range(-1, repeats):
         s = scene.replace(camera=_camera(scene.volume, 0.5 * (i + 1)))
-        t0 = time.perf_counter()
-        plan = tetra.make_plan(s, sort=sort, tables=gl.tables)
-        t1 = time.perf_counter()
-        with _current(gl):
-            fbo = tetra.draw(gl, plan)
-            image = gl.read_target(fbo, s.width, s.height)
-        t2 = time.perf_counter()
-        if i >= 0:
-            sorts.append(t1 - t0)
-            draws.append(t2 - t1)
-            totals.append(t2 - t0)
-        on_frame()
-    return image, plan, statistics.median(sorts), statistics.median(draws), totals
+        for sort in sorts:
+            t0 = time.perf_counter()
+            plans[sort] = plan = tetra.make_plan(s, sort=sort, tables=gl.tables)
+            t1 = time.perf_counter()
+            with _current(gl):
+                gl.read_target(tetra.draw(gl, plan), s.width, s.height)
+            t2 = time.perf_counter()
+            if i >= 0:
+                for part, value in zip(parts[sort], (t1 - t0, t2 - t1, t2 - t0)):
+                    part.append(value)
+            on_frame(sort)
+    return {sort: (plans[sort], statistics.median(p[0]), statistics.median(p[1]), p[2])
+            for sort, p in parts.items()}
 
 
 def _time_cpu_classification(scene, repeats=3):
@@ -106,7 +112,7 @@ def run_mesh(args, err=None):
             peer = None
             vtk_note = f"VTK not available ({e}); VTK rows skipped"
             print(f"dvr-gl bench: {vtk_note}", file=err)
-    renderers = [("dvr_gl tetra mpvo", "mpvo"), ("dvr_gl tetra centroid", "centroid")]
+    renderers = [("dvr_gl tetra mpvo", "mpvo"), ("dvr_gl tetra centroid", "centroid"), ("dvr_gl tetra walk", "walk")]
     if peer is not None:
         renderers.append(("VTK projected tetrahedra", "vtk"))
     frames = 1 + args.repeats
@@ -130,6 +136,9 @@ def run_mesh(args, err=None):
                 progress.advance(f"{name}: exact image")
                 info["cpu_classify_ms"][name] = 1e3 * _time_cpu_classification(scene)
                 progress.advance(f"{name}: CPU classification")
+                sorts = [sort for _, sort in renderers if sort != "vtk"]
+                timed = _time_dvr_gl_sorts(gl, scene, sorts, args.repeats,
+                                           lambda sort: progress.advance(f"{name}: dvr_gl tetra {sort}"))
                 for label, sort in renderers:
                     tick = lambda: progress.advance(f"{name}: {label}")   # noqa: E731
                     if sort == "vtk":
@@ -139,14 +148,15 @@ def run_mesh(args, err=None):
                         for _ in range(frames):
                             tick()
                         row = dict(sort_ms=None, draw_ms=None, cycles_broken=None, gap_constraints=None,
-                                   drawn=None)
+                                   drawn=None, walk_passes=None)
                     else:
-                        _, _, ts, td, times = _time_dvr_gl(gl, scene, sort, args.repeats, tick)
+                        last, ts, td, times = timed[sort]
                         image = gl.render(small, technique="tetra", sort=sort)
                         from ..techniques import tetra
                         plan = tetra.make_plan(scene, sort=sort, tables=gl.tables)
                         row = dict(sort_ms=1e3 * ts, draw_ms=1e3 * td, cycles_broken=plan.order.cycles_broken,
-                                   gap_constraints=plan.order.gap_constraints, drawn=int(plan.draw.size))
+                                   gap_constraints=plan.order.gap_constraints, drawn=int(plan.draw.size),
+                                   walk_passes=last.walk_passes if sort == "walk" else None)
                     e = compare(image, exact)
                     progress.advance(f"{name}: {label} error")
                     row.update(dataset=name, tets=mesh.n_tets, renderer=label, width=args.size,
@@ -168,10 +178,12 @@ def run_mesh(args, err=None):
 
 
 def format_mesh_table(rows):
-    head = ("data", "tets", "renderer", "sort ms", "draw ms", "ms/frame", "RMSE", "max err", "t/VTK", "err/VTK")
+    head = ("data", "tets", "renderer", "sort ms", "draw ms", "ms/frame", "RMSE", "max err", "t/VTK", "err/VTK",
+            "passes")
     lines = [(r["dataset"], str(r["tets"]), r["renderer"], fmt(r["sort_ms"], ".0f"), fmt(r["draw_ms"], ".0f"),
               fmt(r["ms_median"], ".0f"), fmt(r["rmse"], ".2e"), fmt(r["max_abs"], ".3f"),
-              fmt(r["time_vs_vtk"], ".2f"), fmt(r["rmse_vs_vtk"], ".3f")) for r in rows]
+              fmt(r["time_vs_vtk"], ".2f"), fmt(r["rmse_vs_vtk"], ".3f"), fmt(r.get("walk_passes"), "d"))
+             for r in rows]
     widths = [max(len(h), *(len(l[i]) for l in lines)) if lines else len(h) for i, h in enumerate(head)]
 
     def fmt_line(cells):
@@ -188,6 +200,7 @@ def figure_png(rows, info) -> bytes:
     fig = Figure(figsize=(6.5, 4.5), constrained_layout=True)
     ax = fig.subplots()
     markers = {"dvr_gl tetra mpvo": ("tab:blue", "o"), "dvr_gl tetra centroid": ("tab:green", "s"),
+               "dvr_gl tetra walk": ("tab:purple", "D"),
                "VTK projected tetrahedra": ("tab:red", "^")}
     for label, (color, marker) in markers.items():
         pts = [(r["ms_median"], r["rmse"], r["dataset"]) for r in rows if r["renderer"] == label]

@@ -5,6 +5,11 @@
   and raw samples. :mod:`dvr_gl.formats.volumes` describes each format, what the file
   supplies (spacing, origin, anatomical orientation, modality) and how samples are
   widened to the types a Volume holds.
+- :func:`open_volume` opens a volume lazily (a :class:`dvr_gl.model.lazy_volume.LazyVolume`
+  read block by block): zarr stores (v2, v3), OME-Zarr multiscale images, HDF5 datasets
+  (``file.h5:/group/data``) and ``.npy`` memmaps without loading them, other formats
+  loaded and wrapped; :func:`open_store` and :func:`is_store` are the store readers of
+  :mod:`dvr_gl.formats.stores`.
 - :func:`load_series` reads volumes over time into a
   :class:`dvr_gl.model.series.VolumeSeries`: a list of files or a glob pattern, or one
   4-D array (see :mod:`dvr_gl.formats.series` for where each format keeps time).
@@ -50,8 +55,9 @@ from .parsing import RAW_DTYPES, _parse_dtype, parse_orientation, parse_size, pa
 from .raw import raw_name_layout
 from .surfaces import SURFACE_FORMATS, load_surface, save_surface
 from .volumes import SUPPORTED_VOLUMES, load_volume
+from .stores import describe_store, is_store, open_store, open_volume
 from .series import is_series_file, load_series, load_series_file, natural_key, series_paths
 
 __all__ = ["InputError", "MissingFileError", "load_volume", "load_mesh", "is_mesh_file", "point_arrays",
            "save_png", "to_png_array", "load_surface", "save_surface", "parse_size", "parse_triplet", "parse_orientation", "RAW_DTYPES",
-           "load_series", "is_series_file"]
+           "load_series", "is_series_file", "open_volume", "open_store", "is_store"]

@@ -31,7 +31,8 @@ from .isosurface import add_isosurface_parser, cmd_isosurface
 from .inputs import PRESETS  # presets and bundled data sets are shared with the viewer and dvr_gl.render
 from .options import (MESH_TECHNIQUES, OPTION_OF_FIELD, UsageError, _check_input_options, _origin, _shape,
                       _spacing, add_orientation_option, add_render_options, check_dtype_option, check_png, check_technique, clip_args,
-                      geometry_args, input_is_mesh, load_input_args, resolve_tf_option, technique_options)
+                      check_layer_options, geometry_args, input_is_mesh, load_input_args, load_layered_args,
+                      technique_options)
 
 PROG = "dvr-gl"
 
@@ -53,6 +54,7 @@ def build_parser(bench_module=None):
     i.add_argument("file", nargs="?", metavar="FILE",
                    help="a volume file, mesh file or builtin:NAME to describe")
     i.add_argument("--scalars", metavar="NAME", help="mesh FILE: the point array whose range to print")
+    i.add_argument("--key", metavar="KEY", help="zarr or HDF5 FILE: the array inside it (or FILE:/KEY)")
     info_raw = i.add_argument_group("raw files")
     info_raw.add_argument("--shape", type=_shape, metavar="NZ,NY,NX", help="sample counts of a raw file")
     info_raw.add_argument("--dtype", metavar="D", help="sample type of a raw file")
@@ -150,9 +152,15 @@ def cmd_info(args, out=None):
 def cmd_info_file(args, out=None):
     """``info FILE``: what a volume or mesh file holds (no GL)."""
     out = out or sys.stdout
+    if dvr_io.is_store(args.file) and not args.file.lower().endswith(".npy"):  # zarr, HDF5: not loaded
+        print("\n".join(dvr_io.describe_store(args.file, getattr(args, "key", None))), file=out)
+        return 0
     args.input = args.file
     check_dtype_option(args)
     mesh = input_is_mesh(args)
+    if not mesh and dvr_io.is_series_file(args.input):      # time steps or channels
+        from .layer_inputs import describe_4d
+        return describe_4d(args.input, out)
     _check_input_options(args, mesh)
     data, preset = load_input_args(args)
     if mesh:
@@ -271,8 +279,9 @@ def cmd_render(args, out=None):
         if args.preintegrate:
             raise UsageError("--optical-model", f"{args.optical_model} is sampled at segment midpoints; "
                                                 "leave out --preintegrate")
-    if args.shading is None:   # lit by default where lighting is defined
-        args.shading = shading_for(args.technique, mode, args.optical_model or "emission_absorption")
+    layered = check_layer_options(args, mode)
+    if args.shading is None:   # lit by default where lighting is defined (several volumes: not yet)
+        args.shading = shading_for(args.technique, mode, args.optical_model or "emission_absorption") and not layered
     if args.light and not (args.shading or mode == "isosurface"):
         raise UsageError("--light", "is only used with --shading (or --mode isosurface)")
     if args.light and len(args.light) > 4:
@@ -280,12 +289,12 @@ def cmd_render(args, out=None):
     check_dtype_option(args)
 
     t0 = time.perf_counter()
-    volume, default_preset = load_input_args(args)
-    tf_name, tf = resolve_tf_option(args.tf, volume, default_preset)
+    data = load_layered_args(args)      # the input's volume and TF, and any more volumes
+    volume, tf_name, tf = data.volume, data.tf_name, data.tf
     if args.gradients is not None and not (args.shading or mode == "isosurface" or args.illustration
                                            or isinstance(tf, TransferFunction2D)):
         raise UsageError("--gradients", "is only used with --shading, --illustration, a 2D --tf or --mode isosurface")
-    camera = first_camera(volume, azimuth=args.azimuth, elevation=args.elevation, zoom=args.zoom,
+    camera = first_camera(data.framing, azimuth=args.azimuth, elevation=args.elevation, zoom=args.zoom,
                           fov=args.fov, ortho=args.ortho)
     width, height = args.size
     if mode == "isosurface":
@@ -307,7 +316,7 @@ def cmd_render(args, out=None):
     try:
         scene = Scene(volume, tf, camera, width=width, height=height, mode=mode, iso_value=args.iso,
                       shading=args.shading, **({"lights": tuple(args.light)} if args.light else {}), **optical,
-                      **clip_args(args, volume), **geometry_args(args, args.technique))
+                      **clip_args(args, data.framing), **geometry_args(args, args.technique), **data.scene_parts())
     except ValueError as e:
         if not optical:
             raise
@@ -340,7 +349,10 @@ def cmd_render(args, out=None):
         step = f"sort {render_kwargs.get('sort', 'mpvo')}"
     else:
         step = f"step {args.step:g}" if args.step is not None else "default step"
-    if choice is not None:
+    if choice is not None and scene.is_mesh:
+        step = (f"{choice.label} for tolerance {choice.tolerance:g} (pilot RMSE {choice.pilot_rmse:.2g} at "
+                f"{choice.pilot_size[0]}x{choice.pilot_size[1]}, pilot {choice.pilot_seconds:.2f} s)")
+    elif choice is not None:
         step = (f"step {choice.step:g} ({choice.step_voxels:.3g} voxel) for tolerance {choice.tolerance:g}, "
                 f"predicted RMSE {choice.predicted_rmse:.2g}")
         step += ", preintegrate" * choice.preintegrate + f", refine {choice.refine}" * (choice.refine > 1)
@@ -360,6 +372,8 @@ def cmd_render(args, out=None):
         from ..model.transfer import auto_preset_name
         tf_name = f"auto: {auto_preset_name(volume)}"
     print(f"transfer   {_describe_tf(tf_name, tf)}", file=out)
+    if data.layers:
+        print(f"volumes    {data.describe()}", file=out)
     print(f"rendered   {args.technique}, mode {mode}" + (f" {args.iso:g}" if mode == "isosurface" else "")
           + (", lit" if scene.shading else "")
           + f", {step}, {width}x{height}, {view}, backend {backend}", file=out)

@@ -255,7 +255,8 @@ def _surfaces(geometry):
 
 def render(source, *, tf=None, technique=None, size=(512, 512), azimuth=None, elevation=None, zoom=1.0, fov=30.0,
            ortho=False, mode="composite", iso=None, shading=None, lights=None, scalars=None, spacing=None,
-           orientation=None, clip_planes=(), crop_box=None, geometry=(), backend="auto", **options):
+           orientation=None, clip_planes=(), crop_box=None, geometry=(), layers=(), labels=None, channels=False,
+           blend=None, backend="auto", **options):
     """Render ``source`` (anything :func:`load_input` takes) in one call; returns the
     (height, width, 4) float32 premultiplied RGBA image, row 0 on top, as a
     :class:`dvr_gl.frontends.images.RenderedImage` (an ndarray that Jupyter shows as a picture).
@@ -274,11 +275,28 @@ def render(source, *, tf=None, technique=None, size=(512, 512), azimuth=None, el
     backend is kept for the process, so later calls do not compile or upload again.
     ``clip_planes`` and ``crop_box`` cut the data as in :class:`dvr_gl.Scene`; ``geometry``:
     opaque :class:`dvr_gl.Surface` meshes (or surface files, read by
-    :func:`dvr_gl.formats.load_surface`) drawn with the data (technique raycast)."""
+    :func:`dvr_gl.formats.load_surface`) drawn with the data (technique raycast).
+
+    Several volumes (:mod:`dvr_gl.frontends.layer_inputs`; rendered by raycast, unlit):
+    ``layers``: extra scans, each anything ``source`` may be (classified by its own
+    automatic transfer function) or a :class:`dvr_gl.Layer`; ``labels``: a label volume
+    shown in category colours (0 transparent); ``channels=True`` reads ``source``'s first
+    axis as 2 to 4 channels; ``blend``: "mix" (default) or "add" (default for channels)."""
     from ..rendering.renderer import Renderer
     from ..model.scene import Scene
-    data, preset = load_input(source, scalars=scalars, spacing=spacing, orientation=orientation)
-    _, tf = resolve_tf(tf, data, preset)
+    from .layer_inputs import layered_input, wants_layers
+    layered = None
+    if wants_layers(layers, labels, channels):
+        layered = layered_input(source, tf, layers, labels, channels, blend, spacing, load_main=lambda: load_input(
+            source, scalars=scalars, spacing=spacing, orientation=orientation), load_input=load_input,
+                                resolve_tf=resolve_tf)
+        data, tf = layered.volume, layered.tf
+    else:
+        if blend is not None:
+            raise InputError("blend", f"combines several volumes (layers, labels or channels); got blend={blend!r} "
+                                      "with one")
+        data, preset = load_input(source, scalars=scalars, spacing=spacing, orientation=orientation)
+        _, tf = resolve_tf(tf, data, preset)
     try:
         width, height = (int(size), int(size)) if np.isscalar(size) else (int(size[0]), int(size[1]))
     except (TypeError, ValueError, IndexError):
@@ -290,12 +308,12 @@ def render(source, *, tf=None, technique=None, size=(512, 512), azimuth=None, el
         warnings.warn(f"iso {iso:g} is outside the data's range {data.data_range[0]:g}..{data.data_range[1]:g}: "
                       "the surface is empty", stacklevel=2)
     if shading is None:
-        shading = shading_for(technique, mode)
-    scene = Scene(data, tf, first_camera(data, azimuth=azimuth, elevation=elevation, zoom=zoom, fov=fov,
-                                         ortho=ortho),
+        shading = shading_for(technique, mode) and layered is None    # several volumes are not lit yet
+    scene = Scene(data, tf, first_camera(data if layered is None else layered.framing, azimuth=azimuth,
+                                         elevation=elevation, zoom=zoom, fov=fov, ortho=ortho),
                   width=width, height=height, mode=mode, iso_value=iso, shading=shading,
                   **({} if lights is None else {"lights": lights}), clip_planes=clip_planes, crop_box=crop_box,
-                  geometry=_surfaces(geometry))
+                  geometry=_surfaces(geometry), **({} if layered is None else layered.scene_parts()))
     renderer = _RENDERERS.get(backend)
     if renderer is None:
         renderer = _RENDERERS[backend] = Renderer(backend=backend)

@@ -44,8 +44,8 @@ from ..formats import InputError
 from ..model.series import VolumeSeries
 from ..util.files import atomic_path
 from ..formats.series import is_pattern
-from .options import (UsageError, _number, _positive, add_render_options, check_dtype_option, check_technique, clip_args,
-                      geometry_args, technique_options, whole_number)
+from .options import (UsageError, _number, _positive, add_render_options, check_dtype_option, check_layer_options,
+                      check_technique, clip_args, geometry_args, technique_options, whole_number)
 
 #: frames of an orbit when not given: five seconds at 24 fps
 ORBIT_FRAMES = 120
@@ -177,6 +177,77 @@ def resolve_movie_tf(spec, data, default="auto"):
     return resolve_tf(spec, data.pooled(), default)
 
 
+class MovieVolumes:
+    """Several volumes in a movie: the input's (a Volume or a VolumeSeries) and its
+    transfer function, then the extra layers, each a Volume or a VolumeSeries with its
+    classification and matrix. Every series shares one time count (``steps``); a still
+    volume shows in every frame."""
+
+    def __init__(self, main, tf, extras, blend, names):
+        self.main, self.tf, self.extras, self.blend, self.names = main, tf, tuple(extras), blend, tuple(names)
+        counts = [(name, len(d)) for name, d in zip(self.names, (main,) + tuple(e[0] for e in self.extras))
+                  if isinstance(d, VolumeSeries)]
+        for name, n in counts[1:]:
+            if n != counts[0][1]:
+                raise InputError("layers", f"volumes with different time counts: {counts[0][0]} has {counts[0][1]} "
+                                           f"steps, {name} has {n}; every series in a movie has as many")
+        self.steps = counts[0][1] if counts else 1
+
+    def layers_at(self, step):
+        """The extra layers at time ``step``."""
+        from ..model.layers import Layer
+        return tuple(Layer(d[step] if isinstance(d, VolumeSeries) else d, tf, matrix) for d, tf, matrix in self.extras)
+
+    def framing(self, first):
+        """The box around every volume at step 0, in the input's anatomical frame."""
+        from ..model.layers import Extent, Layer, union_bounds
+        extent = Extent(union_bounds((Layer(first, self.tf),) + self.layers_at(0)))
+        extent.orientation = getattr(first, "orientation", None)
+        return extent
+
+
+def movie_volumes(source, tf=None, layers=(), labels=None, channels=False, blend=None, **geometry):
+    """:class:`MovieVolumes` for ``source`` and its extras (see
+    :mod:`dvr_gl.frontends.layer_inputs`): extra scans may be series (a 4-D array or file,
+    a glob pattern), each classified once over all its steps; ``channels`` reads the
+    input's first axis as channels (not time); a label volume is still."""
+    from ..model.layers import Layer
+    from ..model.volume import Volume
+    from .inputs import load_input, resolve_tf
+    from .layer_inputs import _name, check_volume_count, default_blend, label_layer, layered_input
+    extras = [layers] if isinstance(layers, (Layer, str, os.PathLike, np.ndarray, Volume)) else list(layers or ())
+    blend = default_blend(channels, blend)
+    if channels:
+        own = layered_input(source, tf, (), None, True, blend, geometry.get("spacing"), geometry.get("origin"),
+                            geometry.get("mask_nonfinite", False), load_input=load_input, resolve_tf=resolve_tf)
+        main, tf, names = own.volume, own.tf, list(own.names)
+        found = [(layer.volume, layer.tf, layer.matrix) for layer in own.layers]
+    else:
+        main, preset = load_movie_input(source, **geometry)
+        _, tf = resolve_movie_tf(tf, main, preset)
+        names, found = [_name(source)], []
+    check_volume_count(1 + len(found) + len(extras) + (labels is not None), ", ".join(names) + f" and "
+                       f"{len(extras) + (labels is not None)} more")
+    for item in extras:
+        if isinstance(item, Layer):
+            found.append((item.volume, item.tf, item.matrix))
+            continue
+        try:
+            data, preset = load_movie_input(item, spacing=geometry.get("spacing") if isinstance(item, np.ndarray)
+                                            else None)
+        except InputError as e:
+            raise InputError("layers", f"{_name(item)}: {e.detail}") from None
+        if getattr(data, "n_tets", None) is not None:
+            raise InputError("layers", f"{_name(item)} is a mesh; several volumes are grids")
+        found.append((data, resolve_movie_tf(None, data, preset)[1], None))
+    names += [_name(x) for x in extras]
+    if labels is not None:
+        layer = label_layer(labels, geometry.get("spacing"), load_input, main)
+        found.append((layer.volume, layer.tf, layer.matrix))
+        names.append(_name(labels))
+    return MovieVolumes(main, tf, found, blend, names)
+
+
 # ----------------------------------------------------------------------------- rendering
 
 @dataclass
@@ -215,8 +286,8 @@ def render_movie(source, path, *, frames=None, orbit=None, fps=24, size=(512, 51
                  azimuth=None, elevation=None, zoom=1.0, fov=30.0, ortho=False, mode="composite", iso=None,
                  shading=None, lights=None, optical_model=None, illustration=None, clip_planes=(), crop_box=None,
                  geometry=(), background=None, scalars=None, spacing=None, origin=None, orientation=None, shape=None,
-                 dtype=None, mask_nonfinite=False, backend="auto", renderer=None, progress=True,
-                 **options) -> MovieResult:
+                 dtype=None, mask_nonfinite=False, layers=(), labels=None, channels=False, blend=None, backend="auto",
+                 renderer=None, progress=True, **options) -> MovieResult:
     """Render a movie of ``source`` to ``path`` (``.mp4`` or ``.gif``); returns a
     :class:`MovieResult`. The module docstring says which frames are drawn.
 
@@ -233,7 +304,9 @@ def render_movie(source, path, *, frames=None, orbit=None, fps=24, size=(512, 51
     ``optical_model`` and ``illustration`` as in :class:`dvr_gl.Scene`; the camera's
     ``azimuth`` is where the orbit starts. ``renderer``: a ``dvr_gl.Renderer`` to draw
     with (default: one made for this movie and released after it). ``progress``: a bar on
-    stderr."""
+    stderr. ``layers``, ``labels``, ``channels`` and ``blend``: several volumes, as in
+    :func:`dvr_gl.render` (:func:`movie_volumes`; extra series share the input's time
+    count)."""
     from ..model.scene import Scene
     from ..util.progress import Progress
     from .inputs import FIRST_AZIMUTH, _surfaces, first_camera, shading_for
@@ -242,25 +315,39 @@ def render_movie(source, path, *, frames=None, orbit=None, fps=24, size=(512, 51
     fps = check_fps(fps, fmt)
     width, height = check_movie_size(size, fmt)
     imageio = _imageio(fmt)
-    data, preset = load_movie_input(source, scalars=scalars, shape=shape, dtype=dtype, spacing=spacing,
-                                    origin=origin, mask_nonfinite=mask_nonfinite, orientation=orientation)
+    from .layer_inputs import wants_layers
+    stack = source if isinstance(source, MovieVolumes) else None
+    if stack is not None:
+        data, tf = stack.main, stack.tf
+    elif wants_layers(layers, labels, channels):
+        stack = movie_volumes(source, tf, layers, labels, channels, blend, scalars=scalars, shape=shape, dtype=dtype,
+                              spacing=spacing, origin=origin, mask_nonfinite=mask_nonfinite, orientation=orientation)
+        data, tf = stack.main, stack.tf
+    elif blend is not None:
+        raise InputError("blend", f"combines several volumes (layers, labels or channels); got blend={blend!r} "
+                                  "with one")
+    else:
+        data, preset = load_movie_input(source, scalars=scalars, shape=shape, dtype=dtype, spacing=spacing,
+                                        origin=origin, mask_nonfinite=mask_nonfinite, orientation=orientation)
+        _, tf = resolve_movie_tf(tf, data, preset)
     series = data if isinstance(data, VolumeSeries) else None
     first = data[0] if series is not None else data
-    plan = frame_plan(len(series) if series is not None else 1, frames, orbit)
-    _, tf = resolve_movie_tf(tf, data, preset)
+    plan = frame_plan(stack.steps if stack is not None else len(series) if series is not None else 1, frames, orbit)
+    framing = first if stack is None else stack.framing(first)
     if technique is None:
         technique = "tetra" if getattr(first, "n_tets", None) is not None else "raycast"
     optical_model = optical_model or "emission_absorption"
     if shading is None:
-        shading = shading_for(technique, mode, optical_model)
+        shading = shading_for(technique, mode, optical_model) and stack is None    # several volumes: unlit
     if background is None:
         background = (0.0, 0.0, 0.0) if optical_model == "emission" else (1.0, 1.0, 1.0)
     view = dict(elevation=elevation, zoom=zoom, fov=fov, ortho=ortho)
     start = FIRST_AZIMUTH if azimuth is None else float(azimuth)
-    base = Scene(first, tf, first_camera(first, azimuth=start, **view), width=width, height=height, mode=mode,
+    layered = {} if stack is None else {"layers": stack.layers_at(0), "blend": stack.blend}
+    base = Scene(first, tf, first_camera(framing, azimuth=start, **view), width=width, height=height, mode=mode,
                  iso_value=iso, shading=shading, **({} if lights is None else {"lights": lights}),
                  optical_model=optical_model, illustration=illustration, clip_planes=clip_planes, crop_box=crop_box,
-                 geometry=_surfaces(geometry))
+                 geometry=_surfaces(geometry), **layered)
 
     own = renderer is None
     if own:
@@ -278,7 +365,8 @@ def render_movie(source, path, *, frames=None, orbit=None, fps=24, size=(512, 51
                         label = "" if series is None else f", {series.label(step)}"
                         bar.begin(f"frame {i + 1}/{len(plan)}{label}")
                     scene = base.replace(volume=first if series is None else series[step],
-                                         camera=first_camera(first, azimuth=start + turn, **view))
+                                         camera=first_camera(framing, azimuth=start + turn, **view),
+                                         **({} if stack is None else {"layers": stack.layers_at(step)}))
                     t0 = time.perf_counter()
                     image = renderer.render(scene, technique=technique, **options)
                     t1 = time.perf_counter()
@@ -382,17 +470,26 @@ def cmd_movie(args, out=None):
         raise UsageError("--light", f"at most 4 lights, got {len(args.light)}")
     check_dtype_option(args)
 
-    data, preset = load_movie_input(args.input, scalars=args.scalars, shape=args.shape, dtype=args.dtype,
-                                    spacing=args.spacing, origin=args.origin, mask_nonfinite=args.mask_nonfinite,
-                                    orientation=args.orientation)
-    try:
-        tf_name, tf = resolve_movie_tf(args.tf, data, preset)
-    except InputError as e:
-        raise UsageError("--tf", e.detail) from None
-    scene_parts = dict(clip_args(args, data), **geometry_args(args, technique))   # clips, crop, surfaces
+    geometry = dict(scalars=args.scalars, shape=args.shape, dtype=args.dtype, spacing=args.spacing, origin=args.origin,
+                    mask_nonfinite=args.mask_nonfinite, orientation=args.orientation)
+    stack = None
+    if check_layer_options(args, mode):          # several volumes: INPUT's, --volume, --labels, --channels
+        stack = movie_volumes(args.input, args.tf, args.volume or (), args.labels, args.channels, args.blend,
+                              **geometry)
+        data, tf, tf_name = stack.main, None, "one ramp per channel" if args.channels else (args.tf or "auto")
+        framing = stack.framing(data[0] if isinstance(data, VolumeSeries) else data)
+    else:
+        data, preset = load_movie_input(args.input, **geometry)
+        try:
+            tf_name, tf = resolve_movie_tf(args.tf, data, preset)
+        except InputError as e:
+            raise UsageError("--tf", e.detail) from None
+        framing = data
+    scene_parts = dict(clip_args(args, framing), **geometry_args(args, technique))   # clips, crop, surfaces
     series = data if isinstance(data, VolumeSeries) else None
     try:
-        result = render_movie(data, args.out, frames=args.frames, orbit=args.orbit, fps=args.fps, size=args.size,
+        result = render_movie(data if stack is None else stack, args.out, frames=args.frames, orbit=args.orbit,
+                              fps=args.fps, size=args.size,
                               tf=tf, technique=technique, azimuth=args.azimuth, elevation=args.elevation,
                               zoom=args.zoom, fov=args.fov, ortho=args.ortho, mode=mode, iso=args.iso,
                               shading=args.shading, lights=tuple(args.light) if args.light else None,
@@ -413,7 +510,11 @@ def cmd_movie(args, out=None):
         what = f"volume, {nx}x{ny}x{nz} (x, y, z)"
     print(f"input      {args.input}: {what}, values {lo:g}..{hi:g}", file=out)
     print(f"transfer   {tf_name}, resolved once for every frame", file=out)
-    turn = args.orbit if args.orbit is not None else (0.0 if series is not None else 360.0)
+    if stack is not None:
+        print(f"volumes    {len(stack.names)}, blend {stack.blend}: {'; '.join(stack.names)}"
+              + (f", {stack.steps} time steps" if stack.steps > 1 else ""), file=out)
+    still = series is None and (stack is None or stack.steps == 1)
+    turn = args.orbit if args.orbit is not None else (360.0 if still else 0.0)
     print(f"movie      {result.frames} frames, {result.width}x{result.height}, {result.fps:g} fps "
           f"({result.frames / result.fps:.1f} s), orbit {turn:g} degrees, {technique}", file=out)
     print(f"time       {result.summary()}", file=out)

@@ -14,14 +14,16 @@ import os
 
 from .. import formats as dvr_io
 from .inputs import PRESETS
+from ..model.layers import BLENDS
 from ..model.scene import MODES
 
-SORTS = ("mpvo", "centroid")  # dvr_gl.techniques.tetra's orders (imported lazily there)
+SORTS = ("mpvo", "centroid", "walk")  # dvr_gl.techniques.tetra's orders (imported lazily there)
 
 # Which command-line option an InputError's field stands for.
 OPTION_OF_FIELD = {"path": "INPUT", "shape": "--shape", "dtype": "--dtype", "spacing": "--spacing",
                     "origin": "--origin", "size": "--size", "background": "--background",
-                    "scalars": "--scalars", "tf": "--tf", "orientation": "--orientation"}
+                    "scalars": "--scalars", "tf": "--tf", "orientation": "--orientation",
+                    "layers": "--volume", "labels": "--labels", "channels": "--channels", "blend": "--blend"}
 
 
 class UsageError(Exception):
@@ -225,7 +227,8 @@ def add_render_options(r):
     r.add_argument("--scalars", metavar="NAME",
                    help="mesh inputs: the point array to render (default: the first scalar array)")
     r.add_argument("--sort", choices=SORTS,
-                   help="tetra: cell order, exact per pixel (mpvo) or by centroid distance (default: mpvo)")
+                   help="tetra: cell order, exact per pixel (mpvo) or by centroid distance, or none: each ray "
+                        "walked cell to cell on the GPU (walk) (default: mpvo)")
     r.add_argument("--repetitions", type=_count, metavar="R",
                    help="particles: independent particle sets averaged (default: 1)")
     r.add_argument("--seed", type=_count, metavar="N", help="particles: random seed (default: 0)")
@@ -247,12 +250,16 @@ def add_render_options(r):
                         "the smallest spacing; slice2d takes none, see --interpolate; tetra none)")
     r.add_argument("--tolerance", type=_positive, metavar="E",
                    help="raycast: choose the step for an RMSE of at most E against the exact image "
-                        "(measured on a small pilot of the same view); not with --step")
+                        "(measured on a small pilot of the same view); not with --step. A mesh: render "
+                        "it the fastest way measured within E (tetra's sorts or a resampled grid)")
     r.add_argument("--preintegrate", action="store_true",
                    help="pre-integrated classification of whole segments (composite mode)")
     r.add_argument("--refine", type=whole_number(1), metavar="K",
                    help="raycast with --preintegrate: cut segments that may cross a bend of the TF's "
                         "opacity into K parts and at cell faces (adaptive sampling; default: 1, none)")
+    r.add_argument("--brick-size", type=whole_number(1), metavar="N",
+                   help="raycast: draw the volume in bricks of N cells a side, one texture each (the same "
+                        "image to float rounding; default: bricks only where a side exceeds one 3-D texture)")
     r.add_argument("--interpolate", type=_count, metavar="K",
                    help="slice2d: K intermediate slices per cell (default: 0)")
     r.add_argument("--proxy", choices=("cpu", "vertex"),
@@ -295,6 +302,7 @@ def add_render_options(r):
                         "inside the data, lit; rays end at it. Clips leave it whole. Repeat for more")
     r.add_argument("--geometry-color", type=_geometry_color, metavar="R,G,B",
                    help="the colour of the --geometry surfaces (components in [0, 1]; default: 0.85,0.85,0.85)")
+    add_layer_options(r)
     r.add_argument("--size", type=_size, default=(512, 512), metavar="WxH",
                    help="image size in pixels (default: 512x512)")
     r.add_argument("--azimuth", type=_number, default=None, metavar="DEG",
@@ -316,6 +324,78 @@ def add_render_options(r):
                    help="headless GL backend (default: auto, EGL then OSMesa)")
 
 
+def add_layer_options(parser):
+    """--volume, --labels, --channels and --blend: several volumes in one scene
+    (:mod:`dvr_gl.frontends.layer_inputs`)."""
+    g = parser.add_argument_group("several volumes (technique raycast, unlit)")
+    g.add_argument("--volume", action="append", metavar="FILE",
+                   help="another scan drawn with INPUT, on its own grid (its spacing and origin place it) with "
+                        "its own automatic transfer function; repeat for more (4 volumes in all)")
+    g.add_argument("--labels", metavar="FILE",
+                   help="a label volume (a segmentation of whole numbers) shown in category colours, "
+                        "label 0 transparent")
+    g.add_argument("--channels", action="store_true",
+                   help="INPUT is a 4-D array file whose first axis holds 2 to 4 channels (a microscope's), "
+                        "each in its own colour")
+    g.add_argument("--blend", choices=BLENDS,
+                   help="how the volumes combine: mix, one medium (default; composite only), or add, each "
+                        "volume's image summed (default with --channels; also for --mode mip, minip, average)")
+
+
+def check_layer_options(args, mode):
+    """The several-volume options against the rest, before anything is read; True when
+    the scene has several volumes. Each conflict is a UsageError naming an option."""
+    from ..model.layers import MAX_LAYERS
+    from ..techniques.common import LAYER_TECHNIQUES
+    extras, labels, channels = getattr(args, "volume", None) or (), getattr(args, "labels", None), \
+        getattr(args, "channels", False)
+    if not (extras or labels is not None or channels):
+        if getattr(args, "blend", None) is not None:
+            raise UsageError("--blend", "combines several volumes: give --volume, --labels or --channels")
+        return False
+    option = "--channels" if channels else "--volume" if extras else "--labels"
+    if input_is_mesh(args):
+        raise UsageError(option, f"combines grid volumes; {args.input} is a mesh")
+    if args.technique not in LAYER_TECHNIQUES:
+        raise UsageError("--technique", f"{args.technique} renders one volume; several ({option}) are rendered by "
+                                        f"--technique {' or '.join(LAYER_TECHNIQUES)}")
+    if getattr(args, "shading", None):
+        raise UsageError("--shading", f"lighting several volumes is not rendered yet; leave it out with {option}")
+    if channels and args.tf is not None:
+        raise UsageError("--tf", "--channels colours each channel with its own ramp; leave out --tf")
+    if channels and (args.shape is not None or args.dtype is not None):
+        raise UsageError("--channels", "reads a 4-D array file (.npy, .npz, .nrrd, .nii), not raw samples")
+    count = (2 if channels else 1) + len(extras) + (labels is not None)
+    if count > MAX_LAYERS:
+        raise UsageError("--volume" if extras else "--channels", f"a scene holds at most {MAX_LAYERS} volumes in all, "
+                         f"got {count}: INPUT{' (2 or more channels)' if channels else ''}, {len(extras)} --volume"
+                         + (" and --labels" if labels is not None else ""))
+    blend = args.blend or ("add" if channels else "mix")
+    modes = ("composite",) if blend == "mix" else ("composite", "mip", "minip", "average")
+    if mode not in modes:
+        raise UsageError("--mode", f"--blend {blend} renders --mode {' or '.join(modes)}, not {mode}"
+                         + (" (a mix is one medium: use --blend add)" if blend == "mix" else ""))
+    if labels is not None and mode != "composite":
+        raise UsageError("--labels", f"label volumes are composited; --mode {mode} has no meaning for labels")
+    return True
+
+
+def load_layered_args(args):
+    """The scene's data from the parsed options: a :class:`layer_inputs.LayeredInput`
+    (one volume, or INPUT with --volume, --labels, --channels and --blend)."""
+    from .inputs import load_input, resolve_tf
+    from .layer_inputs import LayeredInput, layered_input, wants_layers
+    extras, labels, channels = getattr(args, "volume", None) or (), getattr(args, "labels", None), \
+        getattr(args, "channels", False)
+    if not wants_layers(extras, labels, channels):
+        volume, preset = load_input_args(args)
+        name, tf = resolve_tf_option(args.tf, volume, preset)
+        return LayeredInput(volume, tf, name, names=(args.input,))
+    return layered_input(args.input, args.tf, extras, labels, channels, getattr(args, "blend", None), args.spacing,
+                         args.origin, args.mask_nonfinite, load_main=lambda: load_input_args(args),
+                         load_input=load_input, resolve_tf=resolve_tf)
+
+
 def add_orientation_option(group):
     """``--orientation CODE``, shared by render, view and info."""
     group.add_argument("--orientation", type=_orientation, metavar="CODE",
@@ -330,7 +410,8 @@ TECHNIQUE_OPTIONS = {"interpolate": ("slice2d",), "proxy": ("slice3d",), "shells
                      "preintegrate": ("raycast", "slice2d", "slice3d"), "refine": ("raycast",), "sort": ("tetra",),
                      "repetitions": ("particles",), "seed": ("particles",), "radius": ("particles", "splat"),
                      "sampler": ("particles",), "density": ("splat",), "cutoff": ("splat",), "kernel": ("splat",),
-                     "gradients": ("raycast", "slice2d", "slice3d"), "tolerance": ("raycast",)}
+                     "gradients": ("raycast", "slice2d", "slice3d"), "tolerance": ("raycast", "tetra"),
+                     "brick_size": ("raycast",)}
 
 #: the techniques that render meshes (cell projection); the others render grid volumes
 MESH_TECHNIQUES = ("tetra",)
@@ -361,10 +442,12 @@ def technique_options(args):
     kwargs = {"technique": args.technique}
     if getattr(args, "tolerance", None) is not None and args.step is not None:
         raise UsageError("--tolerance", "chooses the step: leave out --step")
+    if getattr(args, "tolerance", None) is not None and getattr(args, "sort", None) is not None:
+        raise UsageError("--tolerance", "picks the mesh's way of rendering (tetra's sort or a grid): leave out --sort")
     if (getattr(args, "refine", None) or 1) > 1 and not getattr(args, "preintegrate", False):
         raise UsageError("--refine", f"cuts pre-integrated segments: add --preintegrate (got --refine {args.refine})")
     for name in ("step", "tolerance", "preintegrate", "refine", "interpolate", "proxy", "shells", "sort", "repetitions",
-                 "seed", "radius", "sampler", "kernel", "density", "cutoff", "gradients", "target"):
+                 "seed", "radius", "sampler", "kernel", "density", "cutoff", "gradients", "target", "brick_size"):
         value = getattr(args, name, None)
         if value is None or value is False:
             continue

@@ -37,3 +37,11 @@ def linear_filter_is_exact(ctx, tolerance=1e-5):
         with current(ctx):
             tex.release()
     return bool(np.all(np.abs(out[:, 0] - frac) <= tolerance))
+
+
+def max_3d_texture_size(ctx) -> int:
+    """GL_MAX_3D_TEXTURE_SIZE: the most texels a side of one 3-D texture (OpenGL 3.3
+    promises 256; llvmpipe reports 2048)."""
+    with current(ctx):
+        size = ctx.info.get("GL_MAX_3D_TEXTURE_SIZE")
+    return int(size) if size else 256

@@ -10,16 +10,20 @@
 - ``field``: the field between samples (interpolation, gradients), read alike by the
   techniques, their NumPy twins and the exact integrator;
 - ``clipping``: clip planes and crop boxes; ``geometry``: opaque :class:`Surface` meshes;
+- ``layers``: :class:`Layer` and :class:`LabelColors`, several volumes (scans, channels,
+  label volumes) in one scene;
 - ``series``: ``VolumeSeries``, volumes over time on one grid;
-- ``cell_split``: hexahedra, wedges and pyramids into tetrahedra; ``checks``: argument checks.
+- ``cell_split``: hexahedra, wedges and pyramids into tetrahedra; ``mesh_grid``: a mesh's field
+  resampled onto a regular grid; ``checks``: argument checks.
 """
 
 from .camera import Camera, Light, anatomical_frame, default_camera
 from .geometry import Surface
+from .layers import LabelColors, Layer
 from .mesh import TetMesh
 from .scene import Scene
 from .transfer_function import TransferFunction, TransferFunction2D
 from .volume import Volume
 
-__all__ = ["Camera", "Light", "Scene", "Surface", "TetMesh", "TransferFunction", "TransferFunction2D", "Volume",
+__all__ = ["Camera", "LabelColors", "Layer", "Light", "Scene", "Surface", "TetMesh", "TransferFunction", "TransferFunction2D", "Volume",
            "anatomical_frame", "default_camera"]

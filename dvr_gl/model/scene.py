@@ -25,6 +25,7 @@ from .camera import HEADLIGHT, MAX_LIGHTS, Camera, Light, anatomical_frame, defa
 from .checks import _finite_number
 from .clipping import check_clip_planes, check_crop_box, plane_offsets
 from .geometry import check_geometry
+from .layers import Extent, Layer, check_layers, union_bounds
 from .mesh import TetMesh
 from .transfer_function import TransferFunction, TransferFunction2D
 from .volume import Volume
@@ -98,12 +99,19 @@ class Scene:
     world corners, keeps what lies inside it (``dvr_gl.model.clipping``). The image is
     that of the data in the kept region alone. ``geometry``: opaque
     :class:`dvr_gl.Surface` triangle meshes inside or around the data, which end the rays
-    that meet them (``dvr_gl.model.geometry``)."""
+    that meet them (``dvr_gl.model.geometry``).
+
+    ``layers``: more volumes, each a :class:`dvr_gl.Layer` (a grid, its own transfer
+    function or label colours, and its rigid placement in the world), drawn with the
+    scene's own volume, which is the first layer; ``blend`` says how they combine: "mix"
+    (one medium: extinctions and emissions add where layers overlap) or "add" (each
+    layer's image alone, the images summed). See ``dvr_gl.model.layers``;
+    :meth:`from_layers` builds a scene from a list of layers."""
 
     def __init__(self, volume, tf, camera, width=512, height=512, mode="composite",
                  iso_value=None, shading=False, phong=(0.3, 0.7, 0.2, 32.0), lights=(HEADLIGHT,),
                  optical_model="emission_absorption", illustration=None, clip_planes=(), crop_box=None,
-                 geometry=()):
+                 geometry=(), layers=(), blend="mix"):
         if not isinstance(volume, (Volume, TetMesh)):
             raise TypeError(f"volume must be a dvr_gl.Volume or dvr_gl.TetMesh, got {type(volume).__name__}")
         if not isinstance(tf, (TransferFunction, TransferFunction2D)):
@@ -179,7 +187,9 @@ class Scene:
             raise ValueError(f"lights must be 1 to {MAX_LIGHTS} dvr_gl.Light objects, got {lights!r}")
         geometry = check_geometry(geometry)
         clip_planes = check_clip_planes(clip_planes)
-        crop_box = check_crop_box(crop_box, volume.bounds)
+        layers = check_layers(layers, volume, tf, mode=mode, blend=blend, shading=shading,
+                              optical_model=optical_model, tf_2d=tf_2d, illustration=illustration)
+        crop_box = check_crop_box(crop_box, union_bounds((Layer(volume, tf),) + layers) if layers else volume.bounds)
         self.volume = volume
         self.tf = tf              # a TransferFunction2D's envelope when given one
         self.tf_2d = tf_2d        # the TransferFunction2D, or None
@@ -196,6 +206,34 @@ class Scene:
         self.clip_planes = clip_planes   # ((point, normal), ...), world units
         self.crop_box = crop_box         # (lower, upper) world corners, or None
         self.geometry = geometry         # opaque Surfaces that end rays
+        self.layers = layers             # more volumes (Layer), drawn with this one
+        self.blend = blend               # how layers combine: "mix" or "add"
+
+    @classmethod
+    def from_layers(cls, layers, camera=None, **kwargs):
+        """A scene of several volumes: the first layer (a scan, unplaced: it gives the
+        world its frame) becomes the scene's own volume and transfer function, the others
+        its ``layers``. ``camera`` defaults to ``default_camera`` of the box around all."""
+        layers = list(layers)
+        if not layers or not all(isinstance(layer, Layer) for layer in layers):
+            raise TypeError(f"layers must be a non-empty list of dvr_gl.Layer, got {layers!r}")
+        first = layers[0]
+        if first.is_labels or first.placed:
+            raise ValueError("the first layer gives the scene its world: it must be a scan (a TransferFunction) "
+                             "with no matrix; put a label volume or a placed volume after it")
+        if camera is None:
+            camera = default_camera(Extent(union_bounds(layers)))
+        return cls(first.volume, first.tf, camera, layers=layers[1:], **kwargs)
+
+    @property
+    def all_layers(self):
+        """Every volume of the scene as a Layer, its own first."""
+        return (Layer(self.volume, self.tf),) + self.layers
+
+    @property
+    def bounds(self):
+        """(lower, upper) world box around the scene's data, its layers included."""
+        return union_bounds(self.all_layers) if self.layers else self.volume.bounds
 
     # The part of the image a render covers, (x, y, width, height) in pixels with y from
     # the bottom (GL window coordinates); None is the whole image. Set by the Renderer on
@@ -252,7 +290,8 @@ class Scene:
                     height=self.height, mode=self.mode, iso_value=self.iso_value,
                     shading=self.shading, phong=self.phong, lights=self.lights,
                     optical_model=self.optical_model, illustration=dict(self.illustration),
-                    clip_planes=self.clip_planes, crop_box=self.crop_box, geometry=self.geometry)
+                    clip_planes=self.clip_planes, crop_box=self.crop_box, geometry=self.geometry,
+                    layers=self.layers, blend=self.blend)
         args.update(changes)
         return Scene(**args)
 
@@ -273,6 +312,8 @@ class Scene:
             h.update(repr((planes, crop)).encode())
         if self.geometry:
             h.update(repr([s.digest() for s in self.geometry]).encode())
+        if self.layers:               # one-volume scenes keep their earlier digests (and caches)
+            h.update(repr(([layer.digest() for layer in self.layers], self.blend)).encode())
         if self.illustration:
             h.update(repr(sorted(self.illustration.items())).encode())
         if self.tf_2d is not None:

@@ -36,7 +36,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..model.transfer import SegmentKnots
-from .exact import _segmented_exclusive_sum
+from .exact_one import _segmented_exclusive_sum
 
 MAX_PARTS = 16
 GRADED_PARTS = 24

@@ -125,6 +125,10 @@ def render_plan(plan, lut_exact=False):
 
     ``lut_exact=True`` classifies with the exact piecewise-linear transfer function
     instead of the lookup table (the ideal float64 midpoint marcher)."""
+    from ..techniques.raycast_layers import LayersPlan
+    if isinstance(plan, LayersPlan):      # several volumes: their own twin
+        from .raycast_layers import render_plan as render_layers
+        return render_layers(plan, lut_exact=lut_exact)
     scene = plan.scene
     volume, tf = scene.volume, scene.tf
     H, W = scene.height, scene.width

@@ -15,14 +15,29 @@ one's colour is weighted by the product of ``1 - alpha`` of those in front (a se
 cumulative sum of ``log(1 - alpha)``). With clip planes or a crop box, each kernel's
 optical depth along a ray is that of its part in the ray's kept range (``clip_fraction``,
 the shader's closed form with the same erf), and kernels whose cutoff sphere misses the
-kept region are dropped (``sprites``).
+kept region are dropped (``sprites``). With clips or geometry, a tent piece with an end
+at a cut or at the surface (no neighbouring sheet on that side, and the kept range's end
+there is not the box's) takes the field at its middle (trilinear in float64, as the
+shader's texture lookup), lit with its sheet's gradient; its fragment is dropped where
+that middle lies in a masked cell.
+
+Opaque geometry: each pixel's first surface hit is the exact image's own float64 test
+(``exact_geometry.surface_hits``), and the ray's kept range ends there, as at a clip. The
+tent: sheets beyond it are no sheets for that ray, the piece straddling it runs to it,
+and the surface's lit colour is blended under the sheets last (and under the gap pass's
+chords, which end there too). The Gaussian kernel: each kernel counts by its part of the
+ray in front of the surface (``clip_fraction`` up to t_hit, from the clip's start or,
+unclipped, from minus infinity), and the surface is composited behind the splats
+(``surface_behind``: the backmost layer GL draws first).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from ..model.field import cell_is_valid, trilinear, world_to_index
 from .common import blend_under, box_rays, classifier, plane_inside, segment_of, slab_segment
+from .exact_geometry import surface_behind, surface_hits
 from .particles import lit_colors
 from .sprites import kept_ranges, sprite_pixel_pairs
 
@@ -89,6 +104,13 @@ def _render_tent(plan, lut_exact):
     scene = plan.scene
     H, W = scene.height, scene.width
     o, d, t0, t1 = box_rays(scene)
+    box0, box1 = box_rays(scene.replace(clip_planes=(), crop_box=None))[2:] if scene.clips else (t0, t1)
+    if scene.geometry:      # the kept range ends at the first surface (sheet.frag: GEOMETRY)
+        t_hit, surface_color = surface_hits(scene)
+        t1 = np.minimum(t1, t_hit)
+    end_pieces = bool(scene.clips or scene.geometry)     # GLSL END_PIECES
+    volume = scene.volume
+    all_values = volume.values(np.float64)
     cos_theta = d @ scene.camera.forward
     sheets = plan.sheets
     terms = None
@@ -97,7 +119,7 @@ def _render_tent(plan, lut_exact):
         terms = SampleTerms(scene, None)
     classify, transparency = classifier(plan, lut_exact)
     acc = np.zeros((len(o), 4))
-    values = scene.volume.values(np.float64)[plan.samples.mask]
+    values = all_values[plan.samples.mask]
 
     def t_of(k):
         return (sheets.far_depth - k * sheets.spacing) / cos_theta
@@ -115,11 +137,22 @@ def _render_tent(plan, lut_exact):
         seen = (weight > 0) & (bad <= 0)
         rows, tk, points = rows[seen], tk[seen], points[seen]
         s = value[seen] / weight[seen]
-        a, b = slab_segment(k, sheets.count, tk, t_of(k + 1)[rows], t_of(k - 1)[rows], t0[rows], t1[rows])
+        g = None if grad is None else grad[seen] / weight[seen][:, None]
+        t_near, t_far = t_of(k + 1)[rows], t_of(k - 1)[rows]
+        a, b = slab_segment(k, sheets.count, tk, t_near, t_far, t0[rows], t1[rows])
+        if end_pieces:      # a piece with an end at a cut or the surface: the field at its middle
+            cut = ((~plane_inside(k + 1, sheets.count, t_near, t0[rows], t1[rows]) & (t0[rows] > box0[rows]))
+                   | (~plane_inside(k - 1, sheets.count, t_far, t0[rows], t1[rows]) & (t1[rows] < box1[rows])))
+            middle = o[rows[cut]] + (0.5 * (a[cut] + b[cut]))[:, None] * d[rows[cut]]
+            s[cut] = trilinear(all_values, middle / volume.spacing)
+            if volume.has_nonfinite:     # a middle in a masked cell: its fragment is discarded
+                keep = np.ones(rows.size, bool)
+                keep[cut] = cell_is_valid(volume, world_to_index(volume, middle + volume.bounds[0]))
+                rows, tk, points, s, a, b = (x[keep] for x in (rows, tk, points, s, a, b))
+                g = None if g is None else g[keep]
         rgba, clear = classify(s), transparency(s)
         length = (b - a) / scene.tf.unit_distance
         if terms is not None:
-            g = grad[seen] / weight[seen][:, None]
             factor, offset, scale = terms.at(points + scene.volume.bounds[0], d[rows], grad=g)
             lit = rgba[:, 3] > 0
             rgba[:, :3] = np.where(lit[:, None], rgba[:, :3] * factor[:, None] + offset, rgba[:, :3])
@@ -130,15 +163,21 @@ def _render_tent(plan, lut_exact):
     # rays that cross no sheet inside the box: 3D slicing's gap pass on the same planes
     from .slice3d import gap_rays_pass
     gap_rays_pass(acc, plan.gap, (o, d, t0, t1), lut_exact)
+    if scene.geometry:      # the surface, opaque, blended under everything
+        hit = np.isfinite(t_hit)
+        surface = np.concatenate([surface_color[hit], np.ones((int(hit.sum()), 1))], axis=1)
+        acc[hit] = blend_under(acc[hit], surface, plan.target)
     return acc.reshape(H, W, 4)
 
 
-def _gaussian_pairs(plan, clip_terms=False):
+def _gaussian_pairs(plan, clip_terms=False, t_hit=None):
     """Every (pixel, splat) pair near each other, a chunk at a time: the pixels, the
     splats' draw ranks, the rays' directions, their distance from each centre at closest
     approach in standard deviations squared (m2), whether the centre is ahead (b < 0) and
     the kernel's opacity along the ray (the shader's closed form); with ``clip_terms`` (a
-    clipped scene) also a dict of what the kept range's share depends on."""
+    clipped scene, or one with geometry) also a dict of what the kept range's share
+    depends on. ``t_hit``: each pixel's first surface (``surface_hits``; found here when
+    the scene has geometry and it is not given)."""
     order = plan.order
     centres = plan.splats.points[order].astype(np.float64)
     samples = plan.splats.samples[order].astype(np.float64)
@@ -147,8 +186,13 @@ def _gaussian_pairs(plan, clip_terms=False):
     u = plan.kernel_uniforms()
     rank, origins, dirs, chunks = sprite_pixel_pairs(plan.scene, centres, u["u_reach"] * scales)
     clips = plan.scene.clips
-    if clips:
+    ranged = bool(clips or plan.scene.geometry)      # GLSL PART_OF_RAY
+    if ranged:
         keep0, keep1 = kept_ranges(plan.scene, origins, dirs)
+        if not clips:
+            keep0 = np.full(len(origins), -np.inf)   # unclipped, the whole kernel counts
+        if plan.scene.geometry:
+            keep1 = np.minimum(keep1, surface_hits(plan.scene)[0] if t_hit is None else t_hit)
     for ids, pixel in chunks:
         q = origins[pixel] - centres[rank[ids]]
         d = dirs[pixel]
@@ -161,7 +205,7 @@ def _gaussian_pairs(plan, clip_terms=False):
         od = samples[rank[ids], 3] * u["u_norm"] / scale ** 3 / np.sqrt(a) * np.exp(-0.5 * m2)
         ahead = b < 0
         terms = None
-        if clips:
+        if ranged:
             ahead &= keep1[pixel] > keep0[pixel]
             share = clip_fraction(a, b, keep0[pixel], keep1[pixel])
             if clip_terms:
@@ -225,14 +269,40 @@ def clip_rounding(plan, eps=2.0 ** -23):
     return out.reshape(scene.height, scene.width)
 
 
+def surface_rounding(plan, dt, eps=2.0 ** -23):
+    """(H, W): per pixel a bound on how much GL's t_hit, off the float64 hit by ``dt``
+    (per pixel, (H, W)), moves the Gaussian splats' opacities (zero without geometry):
+    ``clip_rounding``'s bound at the kept range's far end where that end is the surface,
+    ``D exp(-D f) exp(-z^2) |dz| / sqrt(pi)`` per splat, ``dz = sqrt(a / 2) (dt + 8 eps |q|)
+    + 8 eps`` (the end, the kernel's centre along the ray, the erf's own rounding)."""
+    scene = plan.scene
+    out = np.zeros(scene.width * scene.height)
+    if not scene.geometry:
+        return out.reshape(scene.height, scene.width)
+    t_hit = surface_hits(scene)[0]
+    dt = np.asarray(dt, np.float64).reshape(-1)
+    for pixel, _, _, _, ahead, _, t in _gaussian_pairs(plan, clip_terms=True, t_hit=t_hit):
+        k = np.sqrt(0.5 * t["a"])
+        at_surface = ahead & np.isfinite(t["t1"]) & (t["t1"] == t_hit[pixel])
+        z = (np.where(at_surface, t["t1"], 0.0) + t["b"] / t["a"]) * k
+        dz = k * (dt[pixel] + 8 * eps * t["q"]) + 8 * eps
+        moved = np.exp(-np.minimum(z * z, 700.0)) * dz / np.sqrt(np.pi)
+        sensitivity = t["depth"] * np.exp(-t["depth"] * t["share"]) * moved
+        np.add.at(out, pixel[at_surface], sensitivity[at_surface])
+    return out.reshape(scene.height, scene.width)
+
+
 def _render_gaussian(plan):
     scene = plan.scene
     W, H = scene.width, scene.height
     samples = plan.splats.samples[plan.order].astype(np.float64)
     gradients = None if plan.gradients is None else plan.gradients[plan.order].astype(np.float64)
     cutoff2 = plan.kernel_uniforms()["u_cutoff2"]
+    t_hit = surface_color = None
+    if scene.geometry:
+        t_hit, surface_color = surface_hits(scene)
     pixels, ranks, alphas, colors = [], [], [], []
-    for pixel, rank, d, m2, ahead, alpha in _gaussian_pairs(plan):
+    for pixel, rank, d, m2, ahead, alpha in _gaussian_pairs(plan, t_hit=t_hit):
         hit = ahead & (m2 <= cutoff2)
         pixels.append(pixel[hit])
         ranks.append(rank[hit])
@@ -243,7 +313,7 @@ def _render_gaussian(plan):
         colors.append(rgb * alpha[hit, None])
     out = np.zeros((H * W, 4))
     if not pixels:
-        return out.reshape(H, W, 4)
+        return out.reshape(H, W, 4) if t_hit is None else surface_behind(out, t_hit, surface_color).reshape(H, W, 4)
     pixel, rnk, alpha, color = (np.concatenate(x) for x in (pixels, ranks, alphas, colors))
     # front to back per pixel: the last drawn is the nearest
     sequence = np.lexsort((-rnk, pixel))
@@ -257,4 +327,6 @@ def _render_gaussian(plan):
     weight = np.exp(before)
     np.add.at(out[:, :3], pixel, color * weight[:, None])
     np.add.at(out[:, 3], pixel, alpha * weight)
+    if t_hit is not None:      # the surface behind the splats (GL draws it first)
+        out = surface_behind(out, t_hit, surface_color)
     return out.reshape(H, W, 4)

@@ -12,6 +12,14 @@ Clip planes and a crop box: each (cell, pixel) segment is cut to the pixel ray's
 interval (box coordinates, as the shader's ``clipRange``), its end values interpolated
 linearly, before anything else; empty ones are dropped, as the shader discards them.
 
+``sort="walk"`` (``techniques.tetra_walk``): the same segments, composited per pixel in
+the order of their distance along the ray (the walk's front-to-back order; a ray meets
+cells in this order whatever the mesh), in float64, the target's rounding applied once
+at the end (the walk accumulates in float32 and writes the target once). Folded cells
+(both cells of a face on one side of it) are the exception: here, as in projection, each
+cell's own segment counts, so their overlap twice; the walk counts it once, as the exact
+image does (tests/test_tetra_walk.py compares those with exact).
+
 Opaque geometry: each pixel's first surface hit is the exact image's own float64 test
 (``exact_geometry.surface_hits``); every segment is cut at it as at a clip (``clip_segments``
 with the interval [0, t_hit]). Composite: the surface's lit colour, opaque, is the
@@ -43,7 +51,7 @@ def render_plan(plan, lut_exact=False):
             hit = np.isfinite(t_surface)
             out[hit, :3] = surface_color[hit]
             out[hit, 3] = 1.0
-            if plan.target != "rgba32f":
+            if plan.target != "rgba32f" and plan.sort != "walk":   # the walk writes the target once
                 out = round_to_target(out, plan.target)
     if plan.draw.size == 0:
         if t_surface is not None and scene.mode != "composite":
@@ -60,9 +68,12 @@ def render_plan(plan, lut_exact=False):
         if t_surface is not None:
             out = surface_behind(out, t_surface, surface_color)
         return out.reshape(H, W, 4)
-    rank = np.full(len(scene.volume.tets), -1, np.int64)
-    rank[plan.draw] = np.arange(plan.draw.size)
-    r = rank[seg["tet"]]
+    if plan.sort == "walk":      # back to front along each ray: farthest entry first
+        r = -seg["t0"]
+    else:
+        rank = np.full(len(scene.volume.tets), -1, np.int64)
+        rank[plan.draw] = np.arange(plan.draw.size)
+        r = rank[seg["tet"]]
     order = np.lexsort((r, seg["pixel"]))              # per pixel, in draw order (back first)
     pix = seg["pixel"][order]
     length = (seg["t1"] - seg["t0"])[order]
@@ -94,7 +105,7 @@ def render_plan(plan, lut_exact=False):
     for k in range(int(counts.max())):
         at = by_layer[bounds[k]:bounds[k + 1]]
         p = pix[at]
-        out[p] = blend_over(out[p], rgba[at], plan.target)
+        out[p] = blend_over(out[p], rgba[at], "rgba32f" if plan.sort == "walk" else plan.target)
     return out.reshape(H, W, 4)
 
 

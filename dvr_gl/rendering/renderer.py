@@ -60,6 +60,8 @@ class Renderer:
         self.tables = TableCache()
         self._error_models = LRU(64)   # tolerance: pilot view and options -> tolerance.ErrorModel
         self._tolerance_picks = LRU(64)  # tolerance: pilot view, options and RMSE -> the Choice timed fastest
+        self._mesh_picks = LRU(64)     # a mesh's tolerance: view family, size and RMSE -> mesh_tolerance.MeshChoice
+        self._mesh_pilots = LRU(16)    # a mesh's tolerance: view family and size -> mesh_tolerance.PilotRecord
 
     # -- lifetime ---------------------------------------------------------------------
     def __enter__(self):
@@ -104,13 +106,17 @@ class Renderer:
         than one GL target (``max_tile``) are rendered in tiles, each a window of the
         same camera, into one array: the same pixels as a single render would give.
 
-        ``tolerance`` (ray casting): an RMSE against the exact image; the step is chosen
-        for it (``dvr_gl.rendering.tolerance``), and what was chosen is ``last_choice``."""
+        ``tolerance``: an RMSE against the exact image; for ray casting the step is chosen
+        for it (``dvr_gl.rendering.tolerance``), for a mesh (technique tetra) the fastest way
+        of rendering it (``dvr_gl.rendering.mesh_tolerance``); what was chosen is ``last_choice``."""
         if tolerance is not None:
             if step is not None:
                 raise ValueError(f"give tolerance or step, not both (got step={step!r}, tolerance={tolerance!r})")
-            step, chosen = self.tolerance_settings(scene, tolerance, technique, **options)
-            options = dict(options, **chosen)
+            if scene.is_mesh:
+                scene, technique, step, options = self.mesh_tolerance_settings(scene, tolerance, technique, **options)
+            else:
+                step, chosen = self.tolerance_settings(scene, tolerance, technique, **options)
+                options = dict(options, **chosen)
         self._revive()
         with current(self.ctx):
             edge = self.max_tile
@@ -144,47 +150,35 @@ class Renderer:
 
     def tolerance_settings(self, scene, tolerance, technique="raycast", **options):
         """(step, options) for an RMSE of ``tolerance`` against the exact image
-        (``dvr_gl.rendering.tolerance``; also ``last_choice``): the error model of the scene's
-        pilot view is measured once per way of sampling and kept, and so is the choice
-        among them."""
+        (``dvr_gl.rendering.tolerance.settings``; also ``last_choice``): the error model and
+        the way of sampling are measured once per volume, TF and options and kept across
+        views and sizes; each view's choice is checked at up to the tolerance module's
+        ``CHECK_SIDE`` pixels."""
         from . import tolerance as tol
-        if technique != "raycast":
-            raise ValueError(f"tolerance chooses the ray caster's step; technique {technique!r} takes its "
-                             f"own options (use technique='raycast')")
-        check_options(technique, options)
-        tolerance = tol.check_tolerance(tolerance)
-        pilot_key = (tol.pilot_scene(scene).digest(), repr(sorted(options.items())))
-
-        def choice(sampling):
-            # the model depends on the pilot alone: images of one view at any size share it
-            key = pilot_key + (tuple(sorted(sampling.items())),)
-            # the pilot measures the step's error alone
-            opts = dict(options, ert_transmittance=0.0, **sampling)
-
-            def pilot(s, h):
-                return self.render(s, technique, step=h, **opts)
-
-            model = self._error_models.get(key, lambda: tol.measure(pilot, scene))
-            model, chosen = tol.verified(model, pilot, scene, tolerance, sampling)
-            self._error_models.put(key, model)        # with the steps verified, for the next request
-            return chosen
-
-        if "preintegrate" in options or "refine" in options:      # the caller's say is kept
-            ways = [{"preintegrate": bool(options.pop("preintegrate", False)), "refine": options.pop("refine", 1)}]
-        else:
-            ways = tol.samplings(scene)
-        if len(ways) == 1:
-            self.last_choice = choice(ways[0])
-        else:
-            def pick():
-                def frame_seconds(chosen):
-                    timed = tol.timing_scene(scene)
-                    return tol.median_seconds(lambda: self.render(timed, technique, step=chosen.step,
-                                                                  **dict(options, **chosen.sampling)))
-                return tol.fastest([choice(way) for way in ways], frame_seconds)
-            # timed at the request's own size (up to TIMING_SIDE): kept per size
-            self.last_choice = self._tolerance_picks.get(pilot_key + (tolerance, scene.width, scene.height), pick)
+        self.last_choice = tol.settings(self, scene, tolerance, technique, options)
         return self.last_choice.step, dict(self.last_choice.sampling)
+
+    def mesh_tolerance_settings(self, scene, tolerance, technique="tetra", **options):
+        """(scene, technique, step, options) that render the mesh ``scene`` the fastest way
+        within RMSE ``tolerance`` of the exact image (``dvr_gl.rendering.mesh_tolerance``; also
+        ``last_choice``); the choice is kept per view family, size and tolerance."""
+        from . import mesh_tolerance as mt
+        from .tolerance import check_tolerance
+        mt.check_request(technique, options)
+        tolerance = check_tolerance(tolerance)
+        family = (mt.view_family(scene), scene.width, scene.height)
+
+        def render(s, name, h, opts):
+            return self.render(s, name, step=h, **opts)
+
+        def choose():
+            record = self._mesh_pilots.get(family, mt.PilotRecord)     # what earlier tolerances measured
+            return mt.choose(render, scene, tolerance, self.tables, record)
+
+        self.last_choice = self._mesh_picks.get(family + (tolerance,), choose)
+        way = mt.Way(self.last_choice.label, self.last_choice.technique, self.last_choice.options,
+                     self.last_choice.grid, self.last_choice.step_spacings)
+        return mt.way_arguments(scene, way, self.tables)
 
     @property
     def max_tile(self):

@@ -20,7 +20,8 @@ SHADING_TECHNIQUES = ("raycast", "slice3d", "slice2d")   # those with every samp
 LIGHTING_TECHNIQUES = SHADING_TECHNIQUES + ("tetra", "particles", "splat")   # those that light composite samples
 GRADIENTS = ("on_the_fly", "texture")
 CLIPPING_TECHNIQUES = ("raycast", "tetra", "slice2d", "slice3d", "particles", "splat")   # those that clip to Scene.clip_planes and crop_box
-GEOMETRY_TECHNIQUES = ("raycast", "particles", "slice2d", "slice3d", "tetra")   # those that end rays at Scene.geometry (opaque surfaces)
+LAYER_TECHNIQUES = ("raycast",)   # those that render Scene.layers (several volumes, channels, labels)
+GEOMETRY_TECHNIQUES = ("raycast", "particles", "slice2d", "slice3d", "tetra", "splat")   # those that end rays at Scene.geometry (opaque surfaces)
 
 
 def check_scene(scene, technique, modes=None, data="volume"):
@@ -64,6 +65,9 @@ def check_scene(scene, technique, modes=None, data="volume"):
     if scene.geometry and technique not in GEOMETRY_TECHNIQUES:
         raise ValueError(f"{technique} does not draw geometry yet: a scene with geometry is rendered by "
                          f"{', '.join(GEOMETRY_TECHNIQUES) or 'no technique yet'}")
+    if scene.layers and technique not in LAYER_TECHNIQUES:
+        raise ValueError(f"{technique} renders one volume; a scene with layers (several volumes, channels or "
+                         f"label volumes) is rendered by {', '.join(LAYER_TECHNIQUES)}")
     if scene.clips and technique not in CLIPPING_TECHNIQUES:
         raise ValueError(f"{technique} does not clip yet: clip_planes and crop_box are rendered by "
                          f"{', '.join(CLIPPING_TECHNIQUES)}")
@@ -569,3 +573,25 @@ class RepeatedIndices:
         if self.ibo is not None:
             self.ibo.release()
             self.ibo = None
+
+
+def draw_ray_proxy(renderer, prog, scene, target, kind, view_proj, surfaces=None):
+    """Run ``prog`` once per pixel of the rays into a cleared ``target``: over the back
+    faces of the proxy ``kind`` (front faces culled, so one fragment a pixel even with the
+    eye close to the box) or a full-screen triangle; with ``surfaces`` every pixel, since
+    a surface outside the data shows too. Returns the framebuffer."""
+    ctx = renderer.ctx
+    if surfaces is not None:
+        kind, view_proj = "fullscreen", np.eye(4)
+    prog["u_view_proj"].write(view_proj.astype("f4").tobytes())
+    vao = proxy_vao(renderer, prog, kind)
+    fbo = cleared_target(renderer, scene, target)
+    ctx.disable(ctx.BLEND | ctx.DEPTH_TEST)
+    if kind == "box":
+        ctx.enable(ctx.CULL_FACE)
+        ctx.cull_face = "front"
+    else:
+        ctx.disable(ctx.CULL_FACE)
+    vao.render()
+    ctx.disable(ctx.CULL_FACE)
+    return fbo

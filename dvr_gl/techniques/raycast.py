@@ -77,6 +77,13 @@ step_table : True (default): a full-length segment (all but a ray's first and la
 gradients : "on_the_fly" (default) | "texture": where a lit sample's gradient comes from
     (``Scene(shading=True)`` and isosurface mode): six lookups of the field, or one of a
     gradient texture made once per volume (``techniques.common.shading_defines``).
+brick_size : None (default) or a whole number N: draw the volume in bricks of N cells a
+    side, each its own texture with a halo of samples (``techniques.bricks``); with None,
+    bricks only where a side exceeds GL_MAX_3D_TEXTURE_SIZE. Rays keep their samples (a
+    brick's pass takes the segments whose midpoint it owns) and their sums (each pass goes
+    on from the image of the bricks in front), so the image is the single texture's up to
+    the rounding of texture coordinates. Composite, mip, minip and average modes; not yet
+    isosurfaces, pre-integration, geometry, gradient textures or masked samples (named errors).
 
 Opaque geometry (``Scene.geometry``): a pass before the ray casting finds each pixel's
 first surface and its lit colour (``techniques.geometry.surface_pass``); the ray ends
@@ -101,11 +108,13 @@ from ..util.cache import IdentityKey, TableCache
 from ..gl.resources import texture3d
 from ..model.scene import Scene
 from ..model.transfer import LookupTable
-from .common import (cleared_target, add_optional_inputs, bind, box_proxy, box_view, camera_uniforms, check_flag,
+from .common import (add_optional_inputs, draw_ray_proxy, bind, box_proxy, box_view, camera_uniforms, check_flag,
                      check_scene, clip_defines, clip_uniforms, grow_pixels, shading_defines,
                      check_step, check_target, preintegration_applies, preintegration_table, tf_uniforms, volume_uniforms)
 from .geometry import surface_pass
-from .gpu import proxy_vao, target_fbo, tf_texture, volume_texture
+from . import raycast_layers
+from .bricks import brick_occupancy, brick_size_for, bricked_defines, check_bricking, draw as draw_bricked
+from .gpu import target_fbo, tf_texture, volume_texture
 
 BRICK = 8            # brick edge in cells, for empty-space skipping
 MAX_REFINE = 64
@@ -135,6 +144,7 @@ class RaycastPlan:
     detail: np.ndarray | None = None       # refine: (n, 2) value intervals of the TF's detail
     defines: dict = field(default_factory=dict)
     step_rows: np.ndarray | None = None    # LookupTable.step_table for this step, or None
+    brick_size: int | None = None          # cells per brick side (bricks.py), None: as the volume needs
 
     @property
     def max_segments(self):
@@ -149,10 +159,13 @@ def default_step(volume):
 
 def make_plan(scene, step=None, *, target="rgba32f", jitter_seed=None, ert_transmittance=1e-3,
               skip_empty=True, preintegrate=False, refine=1, gradients="on_the_fly", step_table=True,
-              tables=None):
+              brick_size=None, tables=None):
     """Validate the options and decide what the scene needs. ``tables`` (a
     ``dvr_gl.util.cache.TableCache``) keeps the TF's lookup table and the volume's brick
     ranges between frames."""
+    if isinstance(scene, Scene) and scene.layers:   # several volumes: raycast_layers plans them (same options)
+        check_bricking(scene, brick_size, preintegrate, gradients)    # (not bricked yet: a named error)
+        return raycast_layers.make_plan(**{k: v for k, v in locals().items() if k != "brick_size"})
     tables = tables or TableCache()
     check_scene(scene, "raycast")
     step = default_step(scene.volume) if step is None else check_step(step, scene.volume)
@@ -164,6 +177,7 @@ def make_plan(scene, step=None, *, target="rgba32f", jitter_seed=None, ert_trans
     if not 0 <= ert_transmittance < 1:
         raise ValueError(f"ert_transmittance must be in [0, 1), got {ert_transmittance!r}")
     check_flag("skip_empty", skip_empty)
+    brick_size = check_bricking(scene, brick_size, preintegrate, gradients)
     if check_flag("preintegrate", preintegrate) and scene.mode != "composite":
         raise ValueError(f"preintegrate applies to mode 'composite' only, got mode {scene.mode!r}")
 
@@ -233,7 +247,7 @@ def make_plan(scene, step=None, *, target="rgba32f", jitter_seed=None, ert_trans
     return RaycastPlan(scene=scene, step=step, lut=lut, target=target, jitter=jitter,
                        ert_transmittance=ert, occupancy=occupancy, preint=preint, defines=defines,
                        step_rows=step_rows, refine=int(refine), preint_fine=fine, bricks=bricks, detail=detail,
-                       reach=reach, reach_block=block)
+                       reach=reach, reach_block=block, brick_size=brick_size)
 
 
 def uses_step_table(scene, preint):
@@ -391,25 +405,6 @@ def block_of(volume, points, shape, block):
     return idx[:, 2], idx[:, 1], idx[:, 0]
 
 
-def brick_occupancy(ranges, lut):
-    """True for bricks in which some value has non-zero opacity.
-
-    The shader's float32 arithmetic can move a value and its table index by a few units
-    in the last place, never more: trilinear weights are convex, so an interpolated value
-    stays within its corners' range up to rounding relative to their magnitude. The
-    range is widened by that much, relative, so a brick of constant air (often exactly
-    the TF's first control point) still counts as empty."""
-    lo, hi = ranges
-    rel = 64 * 2.0 ** -24
-    smin = lo - rel * np.abs(lo)
-    smax = hi + rel * np.abs(hi)
-    u0 = (smin - lut.lo) * lut.scale
-    u1 = (smax - lut.lo) * lut.scale
-    u0 -= rel * np.abs(u0)
-    u1 += rel * np.abs(u1)
-    return lut.max_opacity_between(lut.lo + u0 / lut.scale, lut.lo + u1 / lut.scale) > 0
-
-
 def occupied_faces(occupied, volume, margin):
     """The faces of the occupied bricks (``occupied``, (bricks z, y, x) booleans) that
     border an empty brick or the volume's edge, as triangles: (6 n, 6) float32 rows of
@@ -499,15 +494,19 @@ def occupied_range(renderer, plan):
 def draw(renderer, plan):
     """Render the plan into the renderer's target for its size and format; returns that
     framebuffer (premultiplied RGBA, GL's row order: row 0 at the bottom)."""
+    if isinstance(plan, raycast_layers.LayersPlan):   # several volumes
+        return raycast_layers.draw(renderer, plan)
     ctx = renderer.ctx
     scene = plan.scene
     volume = scene.volume
     occupied = occupied_range(renderer, plan)
     surfaces = surface_pass(renderer, scene) if scene.geometry else None   # each pixel's first surface
     defines = dict(plan.defines, OCCUPIED_RANGE=1) if occupied is not None else plan.defines
-    prog = renderer.programs.get("raycast/raycast.vert", "raycast/raycast.frag", defines)
-
-    textures = {"t_volume": volume_texture(renderer, volume), "t_tf": tf_texture(renderer, plan.lut)}
+    brick_size = brick_size_for(renderer, plan)     # None: the volume in one texture
+    prog = renderer.programs.get("raycast/raycast.vert", "raycast/raycast.frag",
+                                 dict(defines, **bricked_defines(renderer, volume)) if brick_size else defines)
+    textures = {} if brick_size else {"t_volume": volume_texture(renderer, volume)}
+    textures["t_tf"] = tf_texture(renderer, plan.lut)
     if occupied is not None:
         textures["t_occupied_range"] = occupied
     if surfaces is not None:
@@ -547,22 +546,10 @@ def draw(renderer, plan):
     bind(prog, textures, uniforms)
     if plan.refine > 1 and "u_detail" in prog:
         prog["u_detail"].write(detail.tobytes())
-
+    if brick_size:
+        return draw_bricked(renderer, plan, prog, textures, brick_size)
     kind, view_proj = box_proxy(scene, grow_pixels=grow_pixels(renderer.ctx))
-    if surfaces is not None:          # a surface outside the box shows too: every pixel
-        kind, view_proj = "fullscreen", np.eye(4)
-    prog["u_view_proj"].write(view_proj.astype("f4").tobytes())
-    vao = proxy_vao(renderer, prog, kind)
-    fbo = cleared_target(renderer, scene, plan.target)
-    ctx.disable(ctx.BLEND | ctx.DEPTH_TEST)
-    if kind == "box":
-        ctx.enable(ctx.CULL_FACE)
-        ctx.cull_face = "front"
-    else:
-        ctx.disable(ctx.CULL_FACE)
-    vao.render()
-    ctx.disable(ctx.CULL_FACE)
-    return fbo
+    return draw_ray_proxy(renderer, prog, scene, plan.target, kind, view_proj, surfaces)
 
 
 def _table_texture(ctx, rows):

@@ -177,7 +177,7 @@ def draw(renderer, plan):
     prog = renderer.programs.get(vertex_shader, "slice3d/slice3d.frag", plan.defines)
 
     surfaces = surface_pass(renderer, scene) if scene.geometry else None   # each pixel's first surface
-    textures, uniforms = _inputs(renderer, plan)
+    textures, uniforms = slice_inputs(renderer, plan)
     if surfaces is not None:
         textures["t_surface"] = surfaces
     bind(prog, textures, uniforms)
@@ -214,7 +214,8 @@ def draw(renderer, plan):
     return fbo
 
 
-def _inputs(renderer, plan):
+def slice_inputs(renderer, plan):
+    """The slicing pass's textures and uniforms (splat's gap pass binds them too)."""
     scene = plan.scene
     volume = scene.volume
     textures = {"t_volume": volume_texture(renderer, volume), "t_tf": tf_texture(renderer, plan.lut)}
@@ -228,7 +229,7 @@ def draw_gap(renderer, plan, inputs=None):
     """The gap pass into the bound target, blending over it: every ray that meets no
     plane inside the box gets its whole chord (``shaders/common/slice_gap.glsl``). Sheet-
     buffer splatting, whose sheets are these planes, draws it too."""
-    textures, uniforms = inputs or _inputs(renderer, plan)
+    textures, uniforms = inputs or slice_inputs(renderer, plan)
     gap = renderer.programs.get("common/box_instances.vert", "slice3d/slice3d.frag", {**plan.defines, "GAP": 1})
     bind(gap, textures, uniforms)
     draw_box_instances(renderer, gap, plan.scene, 1)

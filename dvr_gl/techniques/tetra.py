@@ -50,7 +50,9 @@ Options (same names in ``dvr_gl.reference.render``)
 ---------------------------------------------------
 sort : "mpvo" (default): visibility order exact at every pixel centre, non-convex
     domains included; "centroid": cells by centroid distance from the eye (cheaper; its
-    error is measured in docs/notes/tetra_vs_vtk.md).
+    error is measured in docs/notes/tetra_vs_vtk.md); "walk": no order at all, each
+    pixel's ray walked from cell to cell through the face adjacency on the GPU, the same
+    exact segments composited front to back (``dvr_gl.techniques.tetra_walk``).
 target : "rgba32f" (default) | "rgba16f" | "rgba8"
     blending happens in the target.
 """
@@ -76,7 +78,7 @@ from .gpu import empty_vao
 MODES = ("composite", "mip", "minip", "average")
 TAKES_STEP = False
 DATA = "mesh"
-SORTS = ("mpvo", "centroid")
+SORTS = ("mpvo", "centroid", "walk")
 TEXEL_ROW_WIDTH = 4096
 MAX_KNOTS = 256            # 2 x 256 vec4 uniforms: within every desktop GL's fragment limit
 
@@ -93,6 +95,9 @@ class TetraPlan:
     defines: dict = field(default_factory=dict)
     sort_seconds: float = 0.0      # time spent ordering for this view (0 when cached)
     behind_eye: np.ndarray = None  # per draw slot: the cell reaches behind the eye's plane
+    walk_passes: int = 0           # sort="walk": layers of depth peeling in the last draw
+    walk_left: int = 0             # sort="walk": pixels with an entry left at the pass cap
+    walk_state: object = None      # sort="walk": the last draw's per-pixel state texture
 
 
 def reaches_behind_eye(scene, cells):
@@ -155,6 +160,9 @@ def make_plan(scene, step=None, *, sort="mpvo", target="rgba32f", tables=None):
         raise ValueError(f"sort must be one of {', '.join(SORTS)}, got {sort!r}")
     check_target(target)
     mesh, tf = scene.volume, scene.tf
+    if sort == "walk":
+        from . import tetra_walk
+        tetra_walk.check_scene(scene)
     knots = tables.get("segment_knots", tf, make=SegmentKnots)
     if scene.mode != "composite":
         # order-independent reductions of the field (not of the TF): every cell with a
@@ -173,6 +181,8 @@ def make_plan(scene, step=None, *, sort="mpvo", target="rgba32f", tables=None):
     timing = {}
 
     def order(mesh, tf, camera):
+        if sort == "walk":       # no order: the GPU walks each ray (tetra_walk); the twin's cells
+            return Order(visible, 0, 0)
         t0 = time.perf_counter()
         fn = mpvo_order if sort == "mpvo" else centroid_order
         result = fn(mesh, visible, scene)
@@ -201,7 +211,7 @@ def make_plan(scene, step=None, *, sort="mpvo", target="rgba32f", tables=None):
                 defines["LIGHTS"] = 1
     return TetraPlan(scene=scene, knots=knots, visible=visible, order=result, draw=draw, sort=sort,
                      target=target, defines=defines, sort_seconds=timing.get("sort", 0.0),
-                     behind_eye=reaches_behind_eye(scene, draw))
+                     behind_eye=None if sort == "walk" else reaches_behind_eye(scene, draw))
 
 
 def knot_capacity(count):
@@ -279,6 +289,12 @@ class _OrderTexture:
 
 def draw(renderer, plan):
     """Render the plan into the renderer's target; returns that framebuffer."""
+    if plan.sort == "walk":     # the cell walk draws with this module's per-mesh textures
+        from . import tetra_walk
+        mesh = plan.scene.volume
+        data = renderer.resources.for_objects("tetra_mesh", mesh, make=lambda: MeshTextures(renderer.ctx, mesh),
+                                              capacity=1)
+        return tetra_walk.draw(renderer, plan, data, _texture)
     ctx = renderer.ctx
     scene = plan.scene
     mesh = scene.volume

@@ -11,7 +11,19 @@
                                  // per context by the program cache); 0: interpolate fetches
 #endif
 
+#ifndef BRICK_INTEGER
+#define BRICK_INTEGER 0          // bricks (bricks.py) of integer data: 1 unsigned, 2 signed texels
+#endif
+#ifndef BRICK_NORMALIZED
+#define BRICK_NORMALIZED 0       // bricks of integer data as 16-bit normalised texels
+#endif
+#if BRICK_INTEGER == 1
+uniform usampler3D t_volume;  // the data's own integers, exact
+#elif BRICK_INTEGER == 2
+uniform isampler3D t_volume;
+#else
 uniform sampler3D t_volume;   // float32 samples in data units; texel centres are samples
+#endif
 uniform vec3 u_dims;          // samples per axis (nx, ny, nz)
 uniform vec3 u_spacing;       // world units per sample step
 #if MASK_NONFINITE
@@ -54,18 +66,61 @@ vec4 fetchBilinear(sampler2DArray t, vec2 x, int layer) {
     return mix(y0, y1, f.y);
 }
 
+#ifndef BRICKED
+#define BRICKED 0
+#endif
+#if BRICKED
+uniform vec3 u_brick_origin;  // the brick texture's first sample (whole numbers; bricks.py)
+uniform vec3 u_brick_texels;  // its samples per axis
+#endif
+
 // A 3D texture whose texel centres are the samples, at a world point.
 vec4 filteredAt(sampler3D t, vec3 p_world) {
-#if TEXTURE_FILTER_EXACT
+#if BRICKED
+    // the brick's texel coordinate: a whole number less than the volume's, exactly
+    vec3 x = p_world / u_spacing - u_brick_origin;
+  #if TEXTURE_FILTER_EXACT
+    return texture(t, (x + 0.5) / u_brick_texels);
+  #else
+    return fetchTrilinear(t, x);
+  #endif
+#elif TEXTURE_FILTER_EXACT
     return texture(t, worldToTex(p_world));
 #else
     return fetchTrilinear(t, p_world / u_spacing);
 #endif
 }
 
+#if BRICK_INTEGER
+// fetchTrilinear over an integer brick: the same arithmetic on the same (exactly
+// converted) values, so the same numbers as a float texture read by fetches
+float sampleVolume(vec3 p_world) {
+    ivec3 last = textureSize(t_volume, 0) - 1;
+    vec3 xc = clamp(p_world / u_spacing - u_brick_origin, vec3(0.0), vec3(last));
+    vec3 lo = floor(xc);
+    vec3 f = xc - lo;
+    ivec3 a = ivec3(lo);
+    ivec3 b = min(a + 1, last);
+#define BRICK_TEXEL(i, j, k) vec4(texelFetch(t_volume, ivec3(i, j, k), 0))
+    vec4 x00 = mix(BRICK_TEXEL(a.x, a.y, a.z), BRICK_TEXEL(b.x, a.y, a.z), f.x);
+    vec4 x10 = mix(BRICK_TEXEL(a.x, b.y, a.z), BRICK_TEXEL(b.x, b.y, a.z), f.x);
+    vec4 x01 = mix(BRICK_TEXEL(a.x, a.y, b.z), BRICK_TEXEL(b.x, a.y, b.z), f.x);
+    vec4 x11 = mix(BRICK_TEXEL(a.x, b.y, b.z), BRICK_TEXEL(b.x, b.y, b.z), f.x);
+#undef BRICK_TEXEL
+    return mix(mix(x00, x10, f.y), mix(x01, x11, f.y), f.z).r;
+}
+#elif BRICK_NORMALIZED
+// bricks of 8- or 16-bit integers as 16-bit normalised texels of the sample less the
+// brick's least: the texture unit filters them with float weights where this is used
+uniform float u_brick_offset;
+float sampleVolume(vec3 p_world) {
+    return filteredAt(t_volume, p_world).r * 65535.0 + u_brick_offset;
+}
+#else
 float sampleVolume(vec3 p_world) {
     return filteredAt(t_volume, p_world).r;
 }
+#endif
 
 #if MASK_NONFINITE
 bool insideValidCell(vec3 p_world) {

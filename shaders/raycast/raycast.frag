@@ -48,6 +48,7 @@
 
 #include "common/camera_ray.glsl"
 #include "common/ray_box.glsl"
+#include "common/bricks.glsl"
 #include "common/clip.glsl"
 #include "common/sampling.glsl"
 #include "common/classification.glsl"
@@ -170,6 +171,7 @@ vec3 segmentMidpoint(vec3 origin, vec3 dir, float t0, float jitter, int k) {
 
 // A full segment's corrected, premultiplied piece from the step table (0 in a masked cell).
 vec4 fullSegment(vec3 p) {
+    if (!OWNED(p)) return vec4(0.0);   // (bricks: another brick's sample)
   #if MASK_NONFINITE
     if (!insideValidCell(p)) return vec4(0.0);
   #endif
@@ -193,6 +195,7 @@ void compositePartial(vec3 origin, vec3 dir, float a, float b, inout vec3 color,
     float len = b - a;
     if (len <= 0.0) return;
     vec3 p = origin + 0.5 * (a + b) * dir;
+    if (!OWNED(p)) return;
   #if MASK_NONFINITE
     if (!insideValidCell(p)) return;
   #endif
@@ -207,7 +210,11 @@ void main() {
     vec3 origin, dir;
     pixelRay(origin, dir);
     vec2 range = clipRange(origin, dir, intersectBox(origin, dir, vec3(0.0), u_extent));
+#if BRICKED
+    f_color = accumulatedSoFar();   // the bricks in front: this pass continues their sums
+#else
     f_color = vec4(0.0);
+#endif
 #if GEOMETRY
     // the ray ends at its first surface, which is composited behind what it gathered
     vec4 surface = texelFetch(t_surface, ivec2(gl_FragCoord.xy), 0);
@@ -230,8 +237,8 @@ void main() {
 #endif
 
 #if MODE_COMPOSITE
-    vec3 color = vec3(0.0);
-    float alpha_acc = 0.0;
+    vec3 color = f_color.rgb;
+    float alpha_acc = f_color.a;
   #if SABELLA
     float s_peak = -1.0 / 0.0;  // the ray's largest sample and where it is first met
     float t_peak = 0.0;
@@ -252,6 +259,13 @@ void main() {
     bool have_prev = false;
     bool above_prev = false;
     float t_hit = -1.0;
+#endif
+
+#if BRICKED && (MODE_MIP || MODE_MINIP)
+    if (f_color.g > 0.5) s_best = f_color.r;   // the bricks in front: (extreme, 1 once a sample is taken)
+#elif BRICKED && MODE_AVERAGE
+    s_sum = f_color.r;                         // (sum of s len, sum of len)
+    len_sum = f_color.g;
 #endif
 
 #if OCCUPIED_RANGE
@@ -283,6 +297,15 @@ void main() {
     // sample k sits at t0 + (jitter + k + 0.5) step
     k_first = int(clamp(floor((t_enter - t0) / u_step - jitter - 0.5), 0.0, float(n_full)));
     k_stop = int(clamp(ceil((t_leave - t0) / u_step - jitter - 0.5) + 1.0, 0.0, float(n_full)));
+  #endif
+  #if BRICKED
+    ended = alpha_acc >= 1.0;
+    #if EARLY_RAY_TERMINATION
+    ended = ended || 1.0 - alpha_acc < u_ert_transmittance;
+    #endif
+    ivec2 k_brick = brickSegments(origin, dir, t0, jitter, u_step);
+    k_first = max(k_first, k_brick.x);
+    k_stop = ended ? k_first : min(k_stop, k_brick.y + 1);
   #endif
     // Four segments per iteration: llvmpipe pays the loop's bookkeeping (its exit tests,
     // the breaks' masks) once per iteration (the CT head at the tolerance's one-voxel
@@ -326,6 +349,18 @@ void main() {
   #if OCCUPIED_RANGE
     k_first = int(clamp(floor((t_enter - t0) / u_step - jitter) - 1.0, -1.0, float(u_max_segments)));
     k_last = int(clamp(floor((t_leave - t0) / u_step - jitter) + 1.0, -1.0, float(u_max_segments)));
+  #endif
+  #if BRICKED && !PREINTEGRATE
+    ivec2 k_brick = brickSegments(origin, dir, t0, jitter, u_step);
+    k_first = max(k_first, k_brick.x);
+    k_last = min(k_last, k_brick.y);
+    #if MODE_COMPOSITE
+    bool ended_before = alpha_acc >= 1.0;
+      #if EARLY_RAY_TERMINATION
+    ended_before = ended_before || 1.0 - alpha_acc < u_ert_transmittance;
+      #endif
+    if (ended_before) k_last = k_first - 1;
+    #endif
   #endif
   #if MODE_COMPOSITE && PREINTEGRATE && REFINE
     // One loop over pieces: a piece is a whole segment, or, where the segment may meet
@@ -442,6 +477,7 @@ void main() {
         if (len <= 0.0) continue;
         float tm = 0.5 * (a + b);
         vec3 p = origin + tm * dir;
+        if (!OWNED(p)) continue;
 #if MASK_NONFINITE
         if (!insideValidCell(p)) {
   #if PREINTEGRATE
@@ -546,6 +582,11 @@ void main() {
     }
 #elif MODE_COMPOSITE
     f_color = vec4(color, alpha_acc);
+#elif BRICKED && (MODE_MIP || MODE_MINIP)
+    // the state for the next brick; the last is classified once (bricks/resolve.frag)
+    f_color = isinf(s_best) ? vec4(0.0) : vec4(s_best, 1.0, 0.0, 0.0);
+#elif BRICKED && MODE_AVERAGE
+    f_color = vec4(s_sum, len_sum, 0.0, 0.0);
 #elif MODE_MIP || MODE_MINIP
     if (!isinf(s_best)) {
         vec4 rgba = applyTF(s_best);

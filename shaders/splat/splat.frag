@@ -3,7 +3,8 @@
 // affine approximation: the ray's own direction, under perspective too), zero where the
 // ray passes farther than the cutoff (in standard deviations) from the centre. The
 // kernel's optical depth there becomes the splat's opacity; GL blends it over what is
-// behind (splats arrive back to front).
+// behind (splats arrive back to front). GEOMETRY: the ray ends at its first surface,
+// drawn into the target first (the backmost layer); a kernel counts by its part in front.
 #version 330 core
 
 #ifndef ORTHO
@@ -13,6 +14,11 @@
 #ifndef SHADING
 #define SHADING 0
 #endif
+
+#ifndef GEOMETRY
+#define GEOMETRY 0
+#endif
+#define PART_OF_RAY (N_CLIP_PLANES > 0 || CROP_BOX || GEOMETRY)
 
 #include "common/camera_ray.glsl"
 #include "common/compositing.glsl"
@@ -29,10 +35,13 @@ flat in float v_scale;         // this kernel's standard deviations are sigma * 
 uniform vec3 u_inv_var;        // 1 / sigma^2 per axis, at scale 1
 uniform float u_cutoff2;       // cutoff^2
 uniform float u_norm;          // 1 / (2 pi sqrt(det) (1 - exp(-cutoff^2 / 2))), at scale 1
+#if GEOMETRY
+uniform sampler2D t_surface;   // per pixel: the first surface's lit colour and its t (3e38: none)
+#endif
 
 out vec4 frag_color;
 
-#if N_CLIP_PLANES > 0 || CROP_BOX
+#if PART_OF_RAY
 // erf(x) to 1.5e-7 (Abramowitz and Stegun 7.1.26; NumPy twin: reference.splat.erf_as)
 float erfAS(float x) {
     float t = 1.0 / (1.0 + 0.3275911 * abs(x));
@@ -55,10 +64,17 @@ void main() {
     float m2 = dot(off * off, inv_var);
     if (m2 > u_cutoff2) discard;
     float depth = v_sample.a * u_norm / (v_scale * v_scale * v_scale) * inversesqrt(a) * exp(-0.5 * m2);
+#if PART_OF_RAY
+    // clipped, or ended at a surface: the kernel along the ray is a 1D Gaussian in t (mean
+    // -b / a, standard deviation 1 / sqrt(a)); only its part in the ray's kept range counts
 #if N_CLIP_PLANES > 0 || CROP_BOX
-    // clipped: the kernel along the ray is a 1D Gaussian in t (mean -b / a, standard
-    // deviation 1 / sqrt(a)); only its part in the ray's kept range counts
     vec2 kept = clipRange(origin, dir, vec2(0.0, 1.0 / 0.0));
+#else
+    vec2 kept = vec2(-1e30, 1e30);            // unclipped, the whole kernel counts
+#endif
+#if GEOMETRY
+    kept.y = min(kept.y, texelFetch(t_surface, ivec2(gl_FragCoord.xy), 0).a);
+#endif
     if (kept.y <= kept.x) discard;
     float centre_t = -b / a;
     float k = sqrt(0.5 * a);

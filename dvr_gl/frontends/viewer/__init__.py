@@ -58,6 +58,7 @@ Each module is one idea; the arrows of their imports point down this list.
 - ``orbit``: the camera (:class:`Orbit`);  ``picking``: point picking on grids and meshes
 - ``keys``: glfw's key codes and the key list (``KEYS_HELP``)
 - ``clipping``: the clip plane's keys (k, K) and alt + drag
+- ``layers``: several volumes, the keys F2..F5 that show or hide each
 """
 
 from .app import Viewer

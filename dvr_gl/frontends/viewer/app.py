@@ -28,6 +28,7 @@ from ...model.scene import Scene
 from .choices import move_iso, next_mode, next_sort, next_technique, scale_step, switch_option
 from .controls import Controls, connect
 from .frames import Presenter
+from .layers import framing, shown_volumes
 from .orbit import Orbit
 from .overlay import TFEditor
 from .picking import pick_data, pick_point
@@ -56,8 +57,10 @@ class Viewer:
         self.clock = time.perf_counter
         self.quit = False
         self.status_line = StatusLine(lambda: self.clock())
-        self.orbit = Orbit(self.volume, settings.azimuth, settings.elevation, settings.zoom,
-                           settings.fov, settings.ortho)
+        self.layers, self.blend = tuple(settings.layers), settings.blend   # more volumes (keys F2..F5)
+        self.hidden_layers = frozenset()   # which of them (0: INPUT) are left out of the scene
+        self.orbit = Orbit(framing(self.volume, settings.tf, self.layers), settings.azimuth, settings.elevation,
+                           settings.zoom, settings.fov, settings.ortho)
         self.editor = TFEditor(settings.tf, self.volume, visible=settings.editor)
         self.initial_tf = settings.tf
         self.mode = settings.mode
@@ -69,7 +72,7 @@ class Viewer:
         self.step = settings.step          # None: the technique's default
         self.clip_planes, self.crop_box = settings.clip_planes, settings.crop_box
         self.geometry = settings.geometry
-        self.tolerance = settings.tolerance  # raycast: an RMSE the full frames are rendered to
+        self.tolerance = settings.tolerance  # an RMSE: raycast's full frames, a mesh's moving ones
         self.options = dict(settings.options)  # technique options: command line, then keys
         self.technique = settings.technique
         self.backgrounds = []
@@ -90,7 +93,8 @@ class Viewer:
         self.techniques = {}
         try:
             # which techniques can render this data at all (in the plain composite mode)
-            probe = Scene(self.volume, self.tf, self.orbit.camera(), width=8, height=8)
+            probe = Scene(self.volume, self.tf, self.orbit.camera(), width=8, height=8,
+                          **({"layers": self.layers, "blend": self.blend} if self.layers else {}))
             self.techniques = probe_techniques(probe, self.renderer.tables)
             self.technique, message = starting_technique(self.techniques, self.technique, self.volume)
             if message:
@@ -187,17 +191,19 @@ class Viewer:
         return self.iso if self.mode == "isosurface" else None
 
     def _scene(self, width, height, tf=None):
-        return Scene(self.volume, tf or self.tf, self.orbit.camera(), width=width, height=height,
+        volume, tf, layered = shown_volumes(self, tf or self.tf)   # the volumes shown (keys F2..F5)
+        return Scene(volume, tf, self.orbit.camera(), width=width, height=height,
                      mode=self.mode, iso_value=self.iso if self.mode == "isosurface" else None,
                      shading=self.lit, **({"lights": self.lights} if self.lights else {}),
                      optical_model=self.optical_model, illustration=self.illustration,
-                     clip_planes=self.clip_planes, crop_box=self.crop_box, geometry=self.geometry)
+                     clip_planes=self.clip_planes, crop_box=self.crop_box, geometry=self.geometry, **layered)
 
     @property
     def lit(self):
-        """Whether the scene is lit: the user's wish (key l), where lighting is defined."""
+        """Whether the scene is lit: the user's wish (key l), where lighting is defined
+        (not with several volumes: lighting them is not rendered yet)."""
         from ..inputs import shading_for
-        return shading_for(self.technique, self.mode, self.optical_model, self.shading)
+        return shading_for(self.technique, self.mode, self.optical_model, self.shading) and not self.layers
 
     def technique_options(self, name=None):
         """The options the technique (default: the current one) takes, of those set."""
@@ -222,6 +228,10 @@ class Viewer:
             # way of sampling) the error model picks for the tolerance, once it is still
             step, sampling = self.renderer.tolerance_settings(scene, self.tolerance, "raycast", **options)
             options.update(sampling)
+        if self.tolerance is not None and self.technique == "tetra" and coarse:
+            # a mesh turns at the fastest way within the tolerance (rendering.mesh_tolerance,
+            # picked once per view family); still frames are tetra's own
+            return self.renderer.mesh_tolerance_settings(scene, self.tolerance, "tetra")
         return scene, self.technique, step, options
 
     def accumulates(self):

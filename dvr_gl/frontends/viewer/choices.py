@@ -68,7 +68,9 @@ def switch_shading(v):
     """Key l: shading on / off, where the technique lights samples in this mode."""
     from ..inputs import shading_for
 
-    if not shading_for(v.technique, v.mode, v.optical_model):
+    if v.layers:
+        v.say("cannot switch shading: lighting several volumes is not rendered yet")
+    elif not shading_for(v.technique, v.mode, v.optical_model):
         v.say(f"cannot switch shading: {v.technique} in mode {v.mode} with optical model "
               f"{v.optical_model} does not light samples")
     elif v.try_change(lambda: setattr(v, "shading", not v.shading), "switch shading"):
@@ -132,7 +134,7 @@ def scale_step(v, coarser):
     tolerance doubles or halves the tolerance instead, and slice2d changes its number
     of interpolated slices."""
     factor = math.sqrt(2.0)
-    if v.tolerance is not None and v.technique == "raycast":
+    if v.tolerance is not None and v.technique in ("raycast", "tetra"):
         v.tolerance *= 2.0 if coarser else 0.5
         v.changed()
         v.say(f"tolerance {v.tolerance:.3g}")

@@ -19,6 +19,7 @@ import os
 
 from .choices import next_illustration, next_optical_model, switch_shading
 from .clipping import aim_clip, move_clip, toggle_clip, toggle_geometry
+from .layers import LAYER_KEYS, toggle_layer
 from .keys import (KEY_COMMA, KEY_EQUAL, KEY_ESCAPE, KEY_F1, KEY_KP_ADD, KEY_KP_SUBTRACT, KEY_LEFT_BRACKET,
                    KEY_MINUS, KEY_PERIOD, KEY_RIGHT_BRACKET, KEYS_HELP, MOD_ALT, MOD_CONTROL, MOD_SHIFT, MOUSE_LEFT,
                    MOUSE_MIDDLE, MOUSE_RIGHT, PRESS, RELEASE, REPEAT, REPEATABLE)
@@ -210,6 +211,8 @@ class Controls:
             v.cycle_sort()
         elif char == "g":
             toggle_geometry(v)
+        elif key in LAYER_KEYS:
+            toggle_layer(v, LAYER_KEYS.index(key))
         elif char == "k":
             if shift:
                 aim_clip(v)

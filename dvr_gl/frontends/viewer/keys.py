@@ -8,6 +8,7 @@ PRESS, RELEASE, REPEAT = 1, 0, 2
 MOUSE_LEFT, MOUSE_RIGHT, MOUSE_MIDDLE = 0, 1, 2
 MOD_SHIFT, MOD_CONTROL, MOD_ALT, MOD_SUPER = 0x1, 0x2, 0x4, 0x8
 KEY_ESCAPE, KEY_F1 = 256, 290
+KEY_F2, KEY_F3, KEY_F4, KEY_F5 = 291, 292, 293, 294
 KEY_MINUS, KEY_EQUAL, KEY_COMMA, KEY_PERIOD = 45, 61, 44, 46
 KEY_LEFT_BRACKET, KEY_RIGHT_BRACKET = 91, 93
 KEY_KP_SUBTRACT, KEY_KP_ADD = 333, 334
@@ -42,6 +43,8 @@ dvr-gl view: keys and mouse
   c                    cell order mpvo / centroid (tetra, for meshes)
   k / K                clip plane through the centre facing you, on / off; turn it to face you
   g                    show / hide the surfaces given with --geometry
+  F2 F3 F4 F5          show / hide volume 1..4: INPUT (or its first channel), then each
+                       --volume, then --labels (or the other --channels)
   - / =                coarser / finer step (slice2d: fewer / more interpolated slices;
                        tetra: none, each cell is integrated exactly; raycast with
                        --tolerance: twice / half the tolerance)

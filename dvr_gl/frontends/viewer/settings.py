@@ -64,6 +64,9 @@ class Settings:
     clip_planes: tuple = ()              # ((point, normal), ...), world units
     crop_box: tuple | None = None        # (lower, upper) world corners
     geometry: tuple = ()                 # opaque dvr_gl.Surface meshes (--geometry)
+    layers: tuple = ()                   # more volumes (dvr_gl.Layer): --volume, --labels, --channels
+    blend: str = "mix"                   # how the volumes combine (--blend)
+    layer_names: tuple = ()              # a name for each volume, INPUT's first
 
 
 def build_parser():
@@ -98,7 +101,7 @@ def build_parser():
 
 def settings_from_args(args) -> Settings:
     """Check the options and load the input (no window yet): a bad file fails here."""
-    from ..options import UsageError, check_png, check_technique, load_input_args, resolve_tf_option, \
+    from ..options import UsageError, check_png, check_technique, check_layer_options, load_layered_args, \
         technique_options, clip_args, geometry_args, check_dtype_option
 
     screenshot, option = (args.screenshot, "--screenshot") if args.screenshot else (args.out, "--out")
@@ -116,8 +119,9 @@ def settings_from_args(args) -> Settings:
     check_dtype_option(args)
     if not args.tf_out.lower().endswith(".json"):
         raise UsageError("--tf-out", f"must name a .json file, got {args.tf_out!r}")
-    volume, default_preset = load_input_args(args)
-    tf_name, tf = resolve_tf_option(args.tf, volume, default_preset)
+    check_layer_options(args, mode)
+    data = load_layered_args(args)              # INPUT's volume and TF, and any more volumes
+    volume, tf_name, tf = data.volume, data.tf_name, data.tf
     return Settings(volume=volume, tf=tf, tf_name=tf_name, input_name=os.path.basename(args.input) or args.input,
                     technique=args.technique, mode=mode, iso=args.iso, step=args.step, size=tuple(args.size),
                     azimuth=args.azimuth, elevation=args.elevation, zoom=args.zoom, fov=args.fov,
@@ -127,4 +131,5 @@ def settings_from_args(args) -> Settings:
                     lights=tuple(args.light) if getattr(args, "light", None) else None,
                     optical_model=getattr(args, "optical_model", None) or "emission_absorption",
                     illustration=tuple(getattr(args, "illustration", None) or ()), tolerance=tolerance,
-                    **clip_args(args, volume), **geometry_args(args, args.technique))
+                    layers=data.layers, blend=data.blend, layer_names=data.names,
+                    **clip_args(args, data.framing), **geometry_args(args, args.technique))

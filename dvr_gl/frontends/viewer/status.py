@@ -40,7 +40,7 @@ def window_title(viewer):
     options = viewer.technique_options()
     info = viewer.info
     step = f"step {f.step:.3g}" if f.step is not None else "fixed sampling"
-    if viewer.tolerance is not None and viewer.technique == "raycast":
+    if viewer.tolerance is not None and viewer.technique in ("raycast", "tetra"):
         step = f"tolerance {viewer.tolerance:.3g}, {step}"
     if "interpolate" in options:
         step += f", interpolate {options['interpolate']}"
@@ -49,6 +49,9 @@ def window_title(viewer):
         extras.append(str(options.get("sort", "mpvo")))
     if viewer.lit:
         extras.append("shaded")
+    if viewer.layers:
+        from .layers import describe_shown
+        extras.append(describe_shown(viewer))
     if viewer.accumulates():
         extras.append(f"{f.accumulated} sets")
     mode = viewer.mode + (f" {viewer.iso:g}" if viewer.mode == "isosurface" else "")

@@ -1,0 +1,432 @@
+"""Projected tetrahedra without a visibility sort: each pixel's ray walked from cell to
+cell on the GPU (``technique="tetra", sort="walk"``; Garrity 1990, Weiler, Kraus and
+Ertl 2003, Marmitt and Slusallek 2006).
+
+Once per mesh: the cells' planes and linear fields (``tetra.MeshTextures``, the same
+textures tetra draws with: a shared face's plane stored once and negated for the second
+cell, so a ray leaves one cell exactly where it enters the next). Once per mesh (and TF,
+where it hides at least ``HIDDEN_FRACTION`` of the cells, ``walked_cells``): each cell's
+four face neighbours (-1 on the boundary of the walked cells), the boundary faces as
+triangles (``WalkTextures``) and per-cell flags (shown, zero volume, folded faces).
+
+Per view, the CPU uploads a camera; then, per layer of depth peeling:
+
+1. entry pass (``walk_entry.vert/.geom/.frag``): the boundary faces are drawn twice,
+   each as its grown bounding box in window coordinates (so coverage is the fragment's
+   test, not rasterisation's: a face seen edge-on keeps its pixels), each fragment
+   finding where its pixel's ray crosses the face's plane going in, inside the face's
+   triangle; the first draw keeps the nearest such t beyond where the pixel's last walk
+   stopped (MIN blending, exact), the second the smallest cell at exactly that t. An
+   occlusion query on the second draw says whether any pixel has an entry left: if none,
+   peeling stops.
+2. walk pass (``walk.frag``, full screen): from its entry, each pixel's ray goes from
+   cell to cell through the face adjacency; in each cell the segment is tetra's own
+   (largest entering and smallest leaving plane crossing, the same float32 arithmetic),
+   cut to the clip's kept interval and at the first opaque surface, integrated exactly
+   (``common/linear_segment.glsl``) and composited front to back. Leaving through a
+   boundary face ends the layer for that pixel; a non-convex domain's re-entry is the
+   next layer's entry. A pixel is done at the end of its kept interval or at opacity
+   1 - 2^-20 (composite).
+3. resolve: the accumulation into the image's target (composite, with the surface
+   behind it) or classified (mip, minip, average: ``tetra_classify.frag``).
+
+Hard cases. Rays through edges and vertices: of tied leaving planes the first is taken;
+the cells around the edge or vertex are then passed with empty segments (each has one
+leaving plane at the tie). Zero-volume cells have planes without a side: the ray passes
+one through the face whose triangle holds its crossing, into a cell it enters there.
+Folded cells (both cells of a face on one side of it): the walk never steps back across
+the face it came in by, a folded face is an entry face too, and a cell that offers no
+way on hands the ray to a folded neighbour that holds it further; the overlap is then
+counted once, as the exact image counts it. Guards (a cycle made by rounding): more
+steps in a layer than the mesh has cells (``max_steps``), or 512 in a row that take the
+ray no further, end the ray, counted per pixel (``walk_counts``). Entries are taken in
+the order of (t, cell), each layer strictly after the last, so peeling cannot repeat an
+entry; it is bounded by ``MAX_PASSES`` (the pixels still having an entry then are
+counted in ``TetraPlan.walk_left``).
+
+A perspective eye inside the mesh: the cell that holds it is found on the CPU (float64,
+once per view), and the first layer starts every ray there. An orthographic view whose
+start plane cuts the mesh: the faces of the cells it cuts (found per view, ``start_faces``)
+are drawn in the first entry pass too, each fragment taking t = 0 in its cell where its
+ray starts inside it. Not done: meshes of 2^24 cells or more (``WalkUnsupported``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..model.mesh import topology
+from .common import (bind, camera_uniforms, clip_uniforms, data_projection, grow_pixels, knot_uniforms,
+                     sample_term_uniforms)
+from .geometry import draw_surface_behind, surface_pass
+from .gpu import empty_vao
+
+MAX_PASSES = 64            # layers of depth peeling (entries along one ray) at most
+HIDDEN_FRACTION = 0.5      # walk only the cells the TF shows where it hides this share (walked_cells)
+MAX_CELLS = 1 << 24        # cell numbers travel as float32 (MIN blending): exact below 2^24
+NO_ENTRY = 3.0e38
+
+
+class WalkUnsupported(ValueError):
+    """A scene the cell walk does not render yet (the message says what to use)."""
+
+
+def check_scene(scene):
+    """Raise ``WalkUnsupported`` for what the walk does not do yet."""
+    mesh = scene.volume
+    if mesh.n_tets >= MAX_CELLS:
+        raise WalkUnsupported(f"sort='walk' takes meshes of fewer than {MAX_CELLS} tets, got {mesh.n_tets}; "
+                              "use sort='centroid'")
+
+
+def max_steps(mesh):
+    """The step guard of one layer's walk: a walk that makes progress meets each cell at
+    most once, so more steps than cells can only be a cycle made by rounding."""
+    return int(mesh.n_tets) + 4
+
+
+def eye_cell(mesh, camera, planes):
+    """The first cell (not of zero volume) that holds a perspective eye, or -1: float64,
+    the cells' own planes (``planes``: topology.cell_planes())."""
+    lo, hi = mesh.bounds
+    if camera.is_ortho or np.any(camera.eye < lo) or np.any(camera.eye > hi):
+        return -1
+    eye = camera.eye - lo
+    flat = topology(mesh).flat
+    for start in range(0, len(planes), 1 << 18):
+        chunk = planes[start:start + (1 << 18)]
+        room = chunk[..., 3] - chunk[..., :3] @ eye
+        inside = (room >= 0.0).all(axis=1) & ~flat[start:start + len(chunk)]
+        if inside.any():
+            return int(start + np.flatnonzero(inside)[0])
+    return -1
+
+
+def neighbours(mesh, walked=None):
+    """(M, 4) int32: the cell across each cell's local face k (the face opposite corner
+    k), -1 on the boundary and where that cell is not in ``walked`` (a bool mask; None:
+    every cell)."""
+    topo = topology(mesh)
+    cells = topo.face_cells[topo.tet_faces]                  # (M, 4, 2)
+    own = np.arange(mesh.n_tets)[:, None]
+    across = np.where(cells[..., 0] == own, cells[..., 1], cells[..., 0])
+    if walked is not None:
+        across = np.where((across >= 0) & walked[np.maximum(across, 0)], across, -1)
+    return across.astype(np.int32)
+
+
+def boundary_faces(mesh, walked=None):
+    """The boundary faces of the walked cells (``walked``: a bool mask, None for all) as
+    vertices of triangles, a structured array of position (float32, relative to the mesh's
+    lower corner) and slot 4 * cell + local face: each walked cell's faces across which
+    lies the boundary or a cell not walked, and the faces of folded cells (both cells of
+    a face on one side of it, as some curvilinear grids have: the union of the two is then
+    entered there, and neither cell's plane says the ray crosses into the other)."""
+    topo = topology(mesh)
+    nb = neighbours(mesh, walked)
+    cell, local = np.nonzero((nb < 0) | folded_faces(mesh))
+    if walked is not None:
+        keep = walked[cell]
+        cell, local = cell[keep], local[keep]
+    vertex = np.dtype([("position", "f4", 3), ("slot", "i4")])
+    out = np.zeros((len(cell), 3), vertex)
+    out["position"] = (mesh.points - mesh.bounds[0])[topo.faces[topo.tet_faces[cell, local]]]
+    out["slot"] = (4 * cell + local)[:, None]
+    return out.reshape(-1)
+
+
+def folded_faces(mesh):
+    """(M, 4) bool: the cell's local face is shared with a cell on the same side of it
+    (their planes there point the same way rather than opposite ways), both with a volume."""
+    topo = topology(mesh)
+    own = np.arange(mesh.n_tets)[:, None]
+    is_first = topo.face_cells[topo.tet_faces, 0] == own
+    sign = np.zeros((len(topo.faces), 2))      # per face: each of its cells' sign
+    sign[topo.tet_faces[is_first], 0] = topo.tet_face_sign[is_first]
+    sign[topo.tet_faces[~is_first], 1] = topo.tet_face_sign[~is_first]
+    a, b = topo.face_cells[:, 0], topo.face_cells[:, 1]
+    # a zero-volume cell's planes have no side (walk.frag passes such cells by their triangles)
+    solid = (b >= 0) & ~topo.flat[a] & ~topo.flat[np.maximum(b, 0)]
+    folded = solid & (sign[:, 0] == sign[:, 1])
+    return folded[topo.tet_faces]
+
+
+def walked_cells(mesh, visible):
+    """Composite: the cells a ray is walked through, a bool mask, or None for all. A cell
+    the TF hides adds nothing, so where the TF hides at least ``HIDDEN_FRACTION`` of the
+    cells, only those it shows (``visible``, found once per TF) and the zero-volume ones
+    (they join shown cells) are walked: the walked region's boundary is then where rays
+    enter and leave, as the mesh's is. Fewer cells are walked, but the region has more
+    holes, and each re-entry costs a layer of depth peeling (two draws of the entry faces
+    and a full-screen pass): scattered hidden cells are cheaper to walk through."""
+    if len(visible) > (1.0 - HIDDEN_FRACTION) * mesh.n_tets:
+        return None
+    walked = topology(mesh).flat.copy()
+    walked[visible] = True
+    return walked
+
+
+class WalkTextures:
+    """The walk's data beyond tetra's, per mesh and set of walked cells: the face
+    neighbours (RGBA32I texture, one texel per cell) and the boundary faces (a vertex buffer)."""
+
+    def __init__(self, ctx, mesh, texture, walked=None):
+        self.neighbours = texture(ctx, neighbours(mesh, walked), "i4")
+        faces = boundary_faces(mesh, walked)
+        self.face_vertices = len(faces)
+        self.faces = ctx.buffer(faces.tobytes())
+        self.vaos = {}
+
+    def vao(self, ctx, prog):
+        vao = self.vaos.get(prog.glo)
+        if vao is None:
+            vao = self.vaos[prog.glo] = ctx.vertex_array(prog, [(self.faces, "3f 1i", "a_position", "a_slot")])
+        return vao
+
+    def release(self):
+        for vao in self.vaos.values():
+            vao.release()
+        self.neighbours.release()
+        self.faces.release()
+
+
+class WalkTargets:
+    """Per image size: two (accumulation, state) RGBA32F framebuffers used in turn, and
+    the entry pass's two R32F targets (nearest t, its cell)."""
+
+    def __init__(self, ctx, width, height):
+        def tex(components):
+            t = ctx.texture((width, height), components, dtype="f4")
+            t.filter = (ctx.NEAREST, ctx.NEAREST)
+            return t
+        self.acc = [tex(4), tex(4)]
+        self.state = [tex(4), tex(4)]
+        self.layers = [ctx.framebuffer([self.acc[i], self.state[i]]) for i in range(2)]
+        self.acc_only = [ctx.framebuffer([t]) for t in self.acc]
+        self.state_only = [ctx.framebuffer([t]) for t in self.state]
+        self.entry_t, self.entry_cell = tex(1), tex(1)
+        self.entry_t_fbo = ctx.framebuffer([self.entry_t])
+        self.entry_cell_fbo = ctx.framebuffer([self.entry_cell])
+
+    def release(self):
+        for fbo in (*self.layers, *self.acc_only, *self.state_only, self.entry_t_fbo, self.entry_cell_fbo):
+            fbo.release()
+        for t in (*self.acc, *self.state, self.entry_t, self.entry_cell):
+            t.release()
+
+
+def draw(renderer, plan, data, texture):
+    """Render a ``sort="walk"`` plan into the renderer's target; returns that framebuffer.
+    ``data``: tetra's per-mesh textures (``tetra.MeshTextures``: planes, field, points,
+    cells), ``texture``: tetra's maker of long tables as textures (``tetra._texture``).
+    Sets ``plan.walk_passes`` (layers walked) and ``plan.walk_left`` (pixels still having
+    an entry after ``MAX_PASSES``; 0 unless the cap was reached)."""
+    from .common import cleared_target
+    ctx = renderer.ctx
+    scene = plan.scene
+    mesh = scene.volume
+    composite = scene.mode == "composite"
+    fbo = cleared_target(renderer, scene, plan.target)
+    surfaces = surface_pass(renderer, scene) if scene.geometry else None
+    plan.walk_passes, plan.walk_left = 0, 0
+    if plan.draw.size == 0:
+        if surfaces is not None:
+            fbo.use()
+            draw_surface_behind(renderer, surfaces)
+        return fbo
+    width, height = scene.target_size
+    # composite walks the cells the TF shows (found once per mesh and TF); the reductions
+    # count every cell
+    shown = (scene.tf,) if composite else ("every cell",)
+    walked = renderer.tables.get("tetra_walk_cells", mesh, *shown, make=lambda m, *_: walked_cells(
+        m, plan.visible) if composite else None)
+    walk = renderer.resources.for_objects("tetra_walk_mesh", mesh, *(shown if walked is not None else ()),
+                                          make=lambda: WalkTextures(ctx, mesh, texture, walked), capacity=1)
+    flags = renderer.resources.for_objects("tetra_walk_flags", mesh, *shown, make=lambda: texture(
+        ctx, cell_flags(mesh, plan.visible if composite else None), "u1"), capacity=1)
+    targets = renderer.resources.get("tetra_walk_targets", (width, height),
+                                     lambda: WalkTargets(ctx, width, height), capacity=1)
+    start = -1
+    if not scene.camera.is_ortho:
+        planes = renderer.tables.get("tetra_walk_planes", mesh, make=lambda m: topology(m).cell_planes())
+        start = renderer.tables.get("tetra_walk_eye_cell", mesh, scene.camera,
+                                    make=lambda m, cam: eye_cell(m, cam, planes))
+        if walked is not None and start >= 0 and not walked[start]:
+            start = -1       # the eye in a cell not walked: rays start at their first entry
+    view = {"ORTHO": 1} if scene.camera.is_ortho else {}
+    entry_prog = renderer.programs.get("tetra/walk_entry.vert", "tetra/walk_entry.frag", view,
+                                       geometry="tetra/walk_entry.geom")
+    walk_prog = renderer.programs.get("tetra/fullscreen.vert", "tetra/walk.frag", plan.defines)
+    view_proj = data_projection(scene, near=None if scene.camera.is_ortho else
+                                1e-6 * float(np.linalg.norm(mesh.extent))).astype("f4").tobytes()
+    cam = camera_uniforms(scene)
+    bind(entry_prog, {}, {**cam, "u_target_size": scene.target_size, "u_inflate": grow_pixels(ctx),
+                          "u_start_margin": 1e-6 * float(np.linalg.norm(mesh.extent))})
+    entry_prog["u_view_proj"].write(view_proj)
+    walk_uniforms = {**cam, "u_knot_count": plan.knots.count, "u_inv_unit": plan.knots.inv_unit,
+                     "u_max_steps": max_steps(mesh), **clip_uniforms(scene)}
+    if scene.shading or scene.illustration:
+        walk_uniforms.update(sample_term_uniforms(renderer, scene, plan.defines))
+    knot_uniforms(walk_prog, plan.knots, plan.defines["KNOT_CAPACITY"])
+    faces = walk.vao(ctx, entry_prog)
+    starts = start_faces(mesh, scene.camera, walked)
+    start_vao = None
+    if starts is not None:
+        start_vao = (renderer.resources.for_objects("tetra_walk_start", make=lambda: _StartFaces(ctx), capacity=1).vao(
+            entry_prog, starts), len(starts))
+    query = renderer.resources.get("tetra_walk_query", "samples", lambda: ctx.query(samples=True), capacity=None)
+
+    ctx.disable(ctx.DEPTH_TEST | ctx.CULL_FACE | ctx.BLEND)
+    targets.acc_only[0].use()
+    targets.acc_only[0].clear(-3.0e38 if scene.mode in ("mip", "minip") else 0.0, 0.0, 0.0, 0.0)
+    targets.state_only[0].use()
+    targets.state_only[0].clear(0.0, -1.0, 0.0, 0.0)     # stopped at t = 0, no entry yet
+    src = 0
+    for layer in range(MAX_PASSES + 1):
+        first_from_eye = layer == 0 and start >= 0
+        if not first_from_eye:
+            starting = layer == 0 and start_vao is not None
+            if _entries(ctx, entry_prog, faces, walk, data, flags, targets, src, query,
+                        start_vao if starting else None) == 0:
+                break
+            if layer == MAX_PASSES:         # the cap: what is left is counted, not walked
+                plan.walk_left = int(query.samples)
+                break
+        dst = 1 - src
+        targets.layers[dst].use()
+        textures = {"t_planes": data.planes, "t_field": data.field, "t_neighbours": walk.neighbours, "t_flags": flags,
+                    "t_tets": data.tets, "t_points": data.points,
+                    "t_acc": targets.acc[src], "t_state": targets.state[src], "t_entry_t": targets.entry_t,
+                    "t_entry_cell": targets.entry_cell}
+        if surfaces is not None:
+            textures["t_surface"] = surfaces
+        bind(walk_prog, textures, {**walk_uniforms, "u_start_cell": start if first_from_eye else -1})
+        empty_vao(renderer, walk_prog).render(ctx.TRIANGLES, vertices=3)
+        src = dst
+        plan.walk_passes += 1
+    ctx.disable(ctx.BLEND)
+    fbo.use()
+    if composite:
+        resolve = renderer.programs.get("tetra/fullscreen.vert", "tetra/walk_resolve.frag",
+                                        {"GEOMETRY": 1} if surfaces is not None else {})
+        textures = {"t_acc": targets.acc[src]}
+    else:
+        resolve = renderer.programs.get("tetra/fullscreen.vert", "tetra/tetra_classify.frag",
+                                        {k: v for k, v in plan.defines.items()
+                                         if k in ("KNOT_CAPACITY", "MODE_MINIP", "MODE_AVERAGE", "GEOMETRY")})
+        textures = {"t_reduced": targets.acc[src]}
+        bind(resolve, {}, {"u_knot_count": plan.knots.count})
+        knot_uniforms(resolve, plan.knots, plan.defines["KNOT_CAPACITY"])
+    if surfaces is not None:
+        textures["t_surface"] = surfaces
+    bind(resolve, textures, {})
+    empty_vao(renderer, resolve).render(ctx.TRIANGLES, vertices=3)
+    plan.walk_state = targets.state[src]
+    return fbo
+
+
+def cell_flags(mesh, visible):
+    """(M, 1) uint8 per cell: 1 (SHOWN in walk.frag) for the cells in ``visible`` (all
+    cells when None), plus 2 (FLAT) for zero-volume cells, plus 4 << k where local face k
+    is folded (``folded_faces``)."""
+    flags = np.zeros((mesh.n_tets, 1), np.uint8)
+    flags[visible if visible is not None else slice(None)] = 1
+    flags[topology(mesh).flat, 0] |= 2
+    flags[:, 0] |= (folded_faces(mesh) * (4 << np.arange(4))).sum(axis=1).astype(np.uint8)
+    return flags
+
+
+def start_faces(mesh, camera, walked):
+    """Orthographic: the faces of the (walked, not zero-volume) cells that the rays'
+    start plane cuts, as ``boundary_faces`` lays them out, or None when it cuts none: a
+    ray starting inside one of them starts its walk there (walk_entry.frag, u_start_faces)."""
+    if not camera.is_ortho:
+        return None
+    topo = topology(mesh)
+    depth = (mesh.points - camera.eye) @ camera.forward
+    if not depth.min() < 0.0 < depth.max():
+        return None
+    d = depth[topo.tets]
+    cut = (d.min(axis=1) < 0.0) & (d.max(axis=1) > 0.0) & ~topo.flat
+    if walked is not None:
+        cut &= walked
+    cell = np.repeat(np.flatnonzero(cut), 4)
+    local = np.tile(np.arange(4), len(cell) // 4)
+    vertex = np.dtype([("position", "f4", 3), ("slot", "i4")])
+    out = np.zeros((len(cell), 3), vertex)
+    out["position"] = (mesh.points - mesh.bounds[0])[topo.faces[topo.tet_faces[cell, local]]]
+    out["slot"] = (4 * cell + local)[:, None]
+    return out.reshape(-1)
+
+
+class _StartFaces:
+    """The start faces' vertex buffer, rewritten per view, grown (never shrunk) as needed."""
+
+    def __init__(self, ctx):
+        self.ctx = ctx
+        self.buffer = None
+        self.vaos = {}
+
+    def vao(self, prog, faces):
+        if self.buffer is None or self.buffer.size < faces.nbytes:
+            self.release()
+            self.buffer = self.ctx.buffer(reserve=max(faces.nbytes, 1 << 16))
+        self.buffer.write(faces.tobytes())
+        vao = self.vaos.get(prog.glo)
+        if vao is None:
+            vao = self.vaos[prog.glo] = self.ctx.vertex_array(prog, [(self.buffer, "3f 1i", "a_position", "a_slot")])
+        return vao
+
+    def release(self):
+        for vao in self.vaos.values():
+            vao.release()
+        self.vaos = {}
+        if self.buffer is not None:
+            self.buffer.release()
+            self.buffer = None
+
+
+def _entries(ctx, prog, faces, walk, data, flags, targets, src, query, start=None):
+    """The entry pass: each pixel's nearest eligible entry (t, then the smallest cell at
+    that t) into ``targets.entry_t`` and ``entry_cell``; returns the pixels that have one
+    (samples of the second draw). ``start``: (vertex array, vertices) of the start faces
+    (orthographic rays that start inside the mesh), drawn too."""
+
+    def render(pick):
+        bind(prog, {}, {"u_pick_cell": pick, "u_start_faces": False})
+        faces.render(ctx.TRIANGLES, vertices=walk.face_vertices)
+        if start is not None:
+            bind(prog, {}, {"u_start_faces": True})
+            start[0].render(ctx.TRIANGLES, vertices=start[1])
+
+    ctx.enable(ctx.BLEND)
+    ctx.blend_func = ctx.ONE, ctx.ONE
+    ctx.blend_equation = ctx.MIN
+    textures = {"t_planes": data.planes, "t_flags": flags, "t_state": targets.state[src],
+                "t_nearest": targets.entry_t}
+    try:
+        targets.entry_t_fbo.use()
+        targets.entry_t_fbo.clear(NO_ENTRY, NO_ENTRY, NO_ENTRY, NO_ENTRY)
+        # t_nearest is not read in this draw; bound to a texture not drawn into
+        bind(prog, dict(textures, t_nearest=targets.entry_cell), {})
+        render(False)
+        targets.entry_cell_fbo.use()
+        targets.entry_cell_fbo.clear(NO_ENTRY, NO_ENTRY, NO_ENTRY, NO_ENTRY)
+        bind(prog, textures, {})
+        with query:
+            render(True)
+    finally:
+        ctx.disable(ctx.BLEND)
+        ctx.blend_equation = ctx.FUNC_ADD
+        ctx.blend_func = ctx.ONE, ctx.ONE_MINUS_SRC_ALPHA
+    return query.samples
+
+
+def walk_counts(renderer, plan):
+    """(cells visited per pixel, pixels whose walk hit the step guard) in the last
+    ``draw`` of ``plan``, read back from the state texture: a test and diagnostic helper,
+    not on the frame's path. Cells visited counts one more per layer (the step that ends it)."""
+    from ..gl.context import current
+    with current(renderer.ctx):
+        state = np.frombuffer(plan.walk_state.read(), np.float32).reshape(-1, 4)
+    return state[:, 2].astype(np.int64), int((state[:, 3] > 0).sum())

@@ -1,0 +1,286 @@
+// The cell walk (techniques/tetra_walk.py), one full-screen pass per layer of depth
+// peeling: each pixel's ray starts in the cell the entry pass found for it (or, for a
+// perspective eye inside the mesh, in the eye's cell), and goes from cell to cell through
+// the face adjacency. In a cell, the segment is the one tetra.frag finds (the same
+// planes and arithmetic: entry at the largest entering crossing, exit at the smallest
+// leaving one), cut to the clip's kept interval and at the first surface, integrated
+// exactly (common/linear_segment.glsl) and composited front to back; the ray then steps
+// to the neighbour across the exit face (the first of tied ones: through an edge or a
+// vertex, the cells around it are passed with empty segments). A neighbour of -1 (the
+// boundary) ends this pass's walk; the next entry pass looks for a re-entry beyond it.
+// mip / minip / average: the running extreme, or integral and length (tetra_classify.frag).
+// Zero-volume cells (flatExit) and folded cells (foldedNext) have rules of their own.
+// The pixel is done when its ray reaches the end of its kept interval, when composite
+// opacity reaches ERT_ALPHA, or at a guard against cycles (MAX_STALLED, u_max_steps).
+#version 330 core
+#include "common/precise.glsl"
+
+#ifndef ORTHO
+#define ORTHO 0
+#endif
+#ifndef MODE_COMPOSITE
+#define MODE_COMPOSITE 1
+#endif
+#ifndef MODE_MIP
+#define MODE_MIP 0
+#endif
+#ifndef MODE_MINIP
+#define MODE_MINIP 0
+#endif
+#ifndef MODE_AVERAGE
+#define MODE_AVERAGE 0
+#endif
+#ifndef SAMPLE_TERMS
+#define SAMPLE_TERMS 0   // lights or illustration terms, each constant in a cell
+#endif
+#ifndef GEOMETRY
+#define GEOMETRY 0       // opaque surfaces: nothing behind the pixel's first one
+#endif
+
+#include "common/camera_ray.glsl"
+#include "common/linear_segment.glsl"
+#include "common/clip.glsl"
+#include "tetra/walk_cell.glsl"
+#if SAMPLE_TERMS
+#define DEPTH_CUE_ALONG_SEGMENT 1
+#include "common/shading.glsl"
+#endif
+
+uniform sampler2D t_field;        // RGBA32F, 3 per cell: (gradient, value at centroid), centroid, range
+uniform isampler2D t_neighbours;  // RGBA32I per cell: the cell across local face k (-1: boundary)
+uniform usampler2D t_flags;       // R8UI per cell: SHOWN (the TF gives some of its value range
+                                  // opacity), FLAT (zero volume)
+uniform isampler2D t_tets;        // RGBA32I per cell: its four points
+uniform sampler2D t_points;       // RGBA32F per point: position relative to the mesh's lower corner
+uniform sampler2D t_acc;          // the previous pass's accumulation
+uniform sampler2D t_state;        // the previous pass's state (tetra/walk_entry.frag)
+uniform sampler2D t_entry_t;      // the entry pass: nearest eligible entry t (3e38: none)
+uniform sampler2D t_entry_cell;   // and its cell
+uniform int u_start_cell;         // >= 0: every ray starts in this cell at t = 0
+uniform int u_max_steps;
+#if GEOMETRY
+uniform sampler2D t_surface;      // the first surface's lit colour and t (3e38: none)
+#endif
+
+layout(location = 0) out vec4 frag_acc;
+layout(location = 1) out vec4 frag_state;
+
+const float ERT_ALPHA = 1.0 - 1.0 / 1048576.0;   // the rest of the ray adds at most 2^-20
+const float DONE = 3.0e38;
+// The guards: a walk that makes progress meets each cell at most once (u_max_steps: the
+// cell count), and goes further along the ray but for the cells around an edge or a vertex
+// it passes through, and layers of zero-volume cells; more steps in a row than
+// MAX_STALLED without going further are a cycle (made by rounding, or by folded cells).
+const int MAX_STALLED = 512;
+const uint SHOWN = 1u;
+const uint FLAT = 2u;
+const uint FOLDS = 60u;      // 4 << k: local face k is shared with a folded cell
+
+// A cell with folded faces (a neighbour on the same side of their shared face, as some
+// curvilinear grids have) that offers the ray no way on: the ray may go on in a folded
+// neighbour, whose own planes (not this cell's) say where it is; the first such
+// neighbour whose segment reaches beyond t_cur. -1: none.
+int foldedNext(uint flags, ivec4 nb, int prev, vec3 origin, vec3 dir, float t_cur) {
+    for (int k = 0; k < 4; ++k) {
+        if ((flags & (4u << uint(k))) == 0u || nb[k] < 0 || nb[k] == prev) continue;
+        mat3x4 normals;
+        vec4 room_at_eye, along, room, t;
+        cellPlanes(nb[k], u_eye, normals, room_at_eye);
+        cellCrossings(normals, room_at_eye, origin, dir, u_eye, along, room, t);
+        vec4 exits = mix(vec4(DONE), t, greaterThan(along, vec4(0.0)));
+        vec4 entries = mix(vec4(0.0), t, lessThan(along, vec4(0.0)));
+        float t_end = min(min(exits.x, exits.y), min(exits.z, exits.w));
+        if (t_end > max(t_cur, max(max(entries.x, entries.y), max(entries.z, entries.w)))) return nb[k];
+    }
+    return -1;
+}
+
+// Does the ray go into cell `into` across its face shared with cell `from` (its own
+// plane there, which has a side: `into` has a volume)?
+bool goesInto(int into, int from, vec3 dir) {
+    ivec4 nb = texelFetch(t_neighbours, texelRow(into), 0);
+    int k = nb.x == from ? 0 : nb.y == from ? 1 : nb.z == from ? 2 : 3;
+    return dot(texelFetch(t_planes, texelRow(4 * into + k), 0).xyz, dir) < 0.0;
+}
+
+// A zero-volume cell has no inside and its planes no side (its four points lie in one
+// plane, so the neighbours it joins lie on both sides of it): the ray, crossing that plane
+// at x, leaves through the face whose triangle holds x (the largest of its smallest
+// barycentric coordinate; scale-free), other than the face it came in by (across which
+// lies prev; entered from the boundary, prev < 0: not a boundary face), and only into a
+// cell it enters there (another zero-volume cell, or one whose own plane says so: not
+// back to the side it came from). -1: none.
+int flatExit(int cell, vec3 x, vec3 dir, ivec4 nb, int prev) {
+    ivec4 v = texelFetch(t_tets, texelRow(cell), 0);
+    vec3 p[4] = vec3[4](texelFetch(t_points, texelRow(v.x), 0).xyz, texelFetch(t_points, texelRow(v.y), 0).xyz,
+                        texelFetch(t_points, texelRow(v.z), 0).xyz, texelFetch(t_points, texelRow(v.w), 0).xyz);
+    float best = -DONE;
+    int pick = -1;
+    for (int k = 0; k < 4; ++k) {
+        if (prev >= 0 ? nb[k] == prev : nb[k] < 0) continue;
+        bool solid = nb[k] >= 0 && (texelFetch(t_flags, texelRow(nb[k]), 0).r & FLAT) == 0u;
+        if (solid && !goesInto(nb[k], cell, dir)) continue;
+        vec3 a = p[(k + 1) % 4], b = p[(k + 2) % 4], c = p[(k + 3) % 4];
+        vec3 m = cross(b - a, c - a);
+        float mm = dot(m, m);
+        if (mm <= 0.0) continue;
+        float la = dot(cross(c - b, x - b), m), lb = dot(cross(a - c, x - c), m), lc = dot(cross(b - a, x - a), m);
+        float score = min(la, min(lb, lc)) / mm;
+        if (score > best) {
+            best = score;
+            pick = k;
+        }
+    }
+    return pick;
+}
+
+void main() {
+    ivec2 px = ivec2(gl_FragCoord.xy);
+    vec4 acc = texelFetch(t_acc, px, 0);
+    vec4 state = texelFetch(t_state, px, 0);
+    frag_acc = acc;
+    frag_state = vec4(DONE, -1.0, state.z, state.w);
+    if (state.x >= 1.0e38) return;
+    int cell;
+    float t_cur;
+    if (u_start_cell >= 0) {
+        cell = u_start_cell;
+        t_cur = 0.0;
+    } else {
+        t_cur = texelFetch(t_entry_t, px, 0).r;
+        if (t_cur >= 1.0e38) return;               // no entry left on this ray
+        cell = int(texelFetch(t_entry_cell, px, 0).r);
+    }
+    float entry_t = t_cur;
+    int entry_cell = cell;
+    vec3 origin, dir;
+    pixelRay(origin, dir);
+    vec2 kept = vec2(0.0, DONE);
+#if N_CLIP_PLANES > 0 || CROP_BOX
+    kept = clipRange(origin, dir, kept);
+#endif
+#if GEOMETRY
+    kept.y = min(kept.y, texelFetch(t_surface, px, 0).a);
+#endif
+    if (kept.y <= kept.x || t_cur >= kept.y) return;
+#if ORTHO
+    PRECISE vec3 offset = origin - u_eye;
+#else
+    vec3 offset = vec3(0.0);
+#endif
+    // The walk steps through cells in an inner loop until it has a segment to add (or the
+    // ray ends or leaves), and adds it in the outer loop: neighbouring pixels then add
+    // their segments together (the integral is the costly part, and pixels that run in
+    // lockstep would otherwise each wait through the others' integrals at every step).
+    bool done = false;      // the ray has ended (kept interval, opacity); else it left the mesh
+    bool left = false;
+    int steps = 0;
+    int prev = -1;          // the cell the walk came from (-1: entered from the boundary or the eye)
+    int stalled = 0;        // steps in a row that took the ray no further
+    while (!done && !left && steps < u_max_steps && stalled < MAX_STALLED) {
+        bool found = false;
+        int seg_cell = -1;
+        float a = 0.0, b = 0.0;
+        while (steps < u_max_steps && stalled < MAX_STALLED) {
+            ++steps;
+            uint flags = texelFetch(t_flags, texelRow(cell), 0).r;
+            ivec4 nb = texelFetch(t_neighbours, texelRow(cell), 0);
+            int next;
+            if ((flags & FLAT) != 0u) {    // no segment; out through the face holding the crossing
+                int face = flatExit(cell, origin + t_cur * dir, dir, nb, prev);
+                next = face < 0 ? -1 : nb[face];
+                ++stalled;
+            } else {
+                mat3x4 normals;
+                vec4 room_at_eye, along, room, t;
+                cellPlanes(cell, u_eye, normals, room_at_eye);
+                cellCrossings(normals, room_at_eye, origin, dir, u_eye, along, room, t);
+                // never back across the face the walk came in by: with the cell's own planes
+                // it is an entering one, except between folded cells (both on one side of
+                // their shared face, as some curvilinear grids have), which would pass the
+                // ray back and forth there
+                bvec4 back = prev >= 0 ? equal(nb, ivec4(prev)) : bvec4(false);
+                vec4 exits = mix(vec4(DONE), t, greaterThan(along, vec4(0.0)));
+                // the segment is tetra's (all four planes); the step leaves by another face
+                float t_end = min(min(exits.x, exits.y), min(exits.z, exits.w));
+                exits = mix(exits, vec4(DONE), back);
+                vec4 entries = mix(vec4(0.0), t, lessThan(along, vec4(0.0)));
+                float t_out = min(min(exits.x, exits.y), min(exits.z, exits.w));
+                int face = t_out == exits.x ? 0 : t_out == exits.y ? 1 : t_out == exits.z ? 2 : 3;
+                float t_in = max(t_cur, max(max(entries.x, entries.y), max(entries.z, entries.w)));
+                // a plane parallel to the ray with the ray outside it: the ray misses this
+                // cell (only where rounding put it here at a tie): no segment, the walk goes on
+                bool outside = any(lessThan(mix(vec4(1.0), room, equal(along, vec4(0.0))), vec4(0.0)));
+                a = max(t_in, kept.x);
+                b = min(t_end, kept.y);
+                // composite: cells the TF makes fully transparent add nothing (once per TF)
+                if (!outside && b > a && (MODE_COMPOSITE == 0 || (flags & SHOWN) != 0u)) {
+                    found = true;
+                    seg_cell = cell;
+                }
+                stalled = t_end > t_cur ? 0 : stalled + 1;
+                t_cur = max(t_cur, t_end);
+                next = t_out < 1.0e38 ? nb[face] : -1;     // none: no leaving plane but the way back
+                if (next < 0 && (flags & FOLDS) != 0u) next = foldedNext(flags, nb, prev, origin, dir, t_cur);
+                if (t_cur >= kept.y) {
+                    done = true;
+                    break;
+                }
+            }
+            if (next < 0) {                        // left the mesh: a re-entry is the next layer's
+                left = true;
+                break;
+            }
+            prev = cell;
+            cell = next;
+            if (found) break;
+        }
+        if (!found) break;
+        vec4 field = texelFetch(t_field, texelRow(3 * seg_cell), 0);
+        vec3 centre = texelFetch(t_field, texelRow(3 * seg_cell + 1), 0).xyz;
+        vec2 range = texelFetch(t_field, texelRow(3 * seg_cell + 2), 0).xy;
+        float at_eye = field.w + dot(field.xyz, u_eye - centre);
+        float rate = dot(field.xyz, dir);
+        float s_at_start = at_eye + dot(field.xyz, offset);
+        float s_front = clamp(s_at_start + a * rate, range.x, range.y);
+        float s_back = clamp(s_at_start + b * rate, range.x, range.y);
+#if MODE_MIP
+        acc = vec4(max(acc.r, max(s_front, s_back)), 0.0, 0.0, 1.0);
+#elif MODE_MINIP
+        acc = vec4(max(acc.r, -min(s_front, s_back)), 0.0, 0.0, 1.0);
+#elif MODE_AVERAGE
+        float len = b - a;
+        acc = vec4(acc.r + 0.5 * (s_front + s_back) * len, acc.g + len, 0.0, 1.0);
+#else
+  #if SAMPLE_TERMS
+        float factor, scale;
+        vec3 added;
+        termsFor(field.xyz, origin, dir, factor, added, scale);
+        float q_front = 1.0, q_back = 1.0;
+    #if DEPTH_CUE
+        q_front = depthCue(origin + a * dir);
+        q_back = depthCue(origin + b * dir);
+    #endif
+        float cued_alpha;
+        vec4 seg = linearSegmentCued(s_front, s_back, (b - a) * scale, q_front, q_back, cued_alpha);
+        seg.rgb = seg.rgb * factor + added * cued_alpha;
+  #else
+        vec4 seg = linearSegment(s_front, s_back, b - a);
+  #endif
+  #if OPTICAL_MODEL == 2
+        seg.a = 0.0;          // emission only: colours add, nothing absorbs
+  #endif
+        acc += (1.0 - acc.a) * seg;              // front to back: the segment under what is in front
+        if (acc.a >= ERT_ALPHA) done = true;
+#endif
+    }
+    frag_acc = acc;
+    float walked = state.z + float(steps);       // cells visited so far (diagnostics)
+    if (done) {
+        frag_state = vec4(DONE, -1.0, walked, state.w);
+    } else if (!left) {                          // the guard: counted, the ray ended
+        frag_state = vec4(DONE, -1.0, walked, state.w + 1.0);
+    } else {
+        frag_state = vec4(t_cur, t_cur == entry_t ? float(entry_cell) : -1.0, walked, state.w);
+    }
+}

@@ -1,0 +1,47 @@
+// The cell walk (techniques/tetra_walk.py): a pixel's ray against one cell's four planes,
+// computed as tetra.vert and tetra.frag compute them (the same planes, the same
+// arithmetic), so a ray leaves one cell at exactly the distance where it enters the
+// next, and a boundary face's entry distance here is bitwise the walk's own.
+#ifndef DVR_WALK_CELL_GLSL
+#define DVR_WALK_CELL_GLSL
+
+#include "common/texel_rows.glsl"
+
+#ifndef ORTHO
+#define ORTHO 0
+#endif
+#ifndef PRECISE
+#define PRECISE
+#endif
+
+uniform sampler2D t_planes;   // RGBA32F, 4 per cell: outward unit normal, offset (n.x = d)
+
+// The cell's outward normals by component (column k: component k of the four normals)
+// and the planes' offsets from the eye (d - n . eye), as tetra.vert has them.
+void cellPlanes(int cell, vec3 eye, out mat3x4 normals, out vec4 room_at_eye) {
+    vec4 p0 = texelFetch(t_planes, texelRow(4 * cell), 0);
+    vec4 p1 = texelFetch(t_planes, texelRow(4 * cell + 1), 0);
+    vec4 p2 = texelFetch(t_planes, texelRow(4 * cell + 2), 0);
+    vec4 p3 = texelFetch(t_planes, texelRow(4 * cell + 3), 0);
+    normals = mat3x4(vec4(p0.x, p1.x, p2.x, p3.x), vec4(p0.y, p1.y, p2.y, p3.y), vec4(p0.z, p1.z, p2.z, p3.z));
+    PRECISE vec4 room = vec4(p0.w, p1.w, p2.w, p3.w) - normals * eye;
+    room_at_eye = room;
+}
+
+// Per plane: the ray's rate towards the outside (n . dir) and its distance t where it
+// crosses (inf where parallel); room: how far inside the ray's start is (d - n . origin).
+void cellCrossings(mat3x4 normals, vec4 room_at_eye, vec3 origin, vec3 dir, vec3 eye,
+                   out vec4 along, out vec4 room, out vec4 t) {
+    PRECISE vec4 a = normals * dir;
+#if ORTHO
+    PRECISE vec3 offset = origin - eye;     // orthographic rays start off the eye
+    PRECISE vec4 r = room_at_eye - normals * offset;
+#else
+    vec4 r = room_at_eye;
+#endif
+    along = a;
+    room = r;
+    t = r / a;
+}
+
+#endif

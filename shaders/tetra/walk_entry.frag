@@ -1,0 +1,74 @@
+// The cell walk's entry pass, per fragment of a boundary face: the pixel's ray crosses
+// the face's plane (the cell's own plane, tetra's arithmetic: tetra/walk_cell.glsl)
+// going into the cell, at t. Of the entries beyond where the pixel's last walk stopped,
+// the target keeps the nearest (MIN blending of t, exact in float32), and a second draw of
+// the same faces keeps, among those at exactly that t, the smallest cell (MIN blending of
+// the cell number). "Beyond" is in the order of (t, cell): t greater than the last stop,
+// or equal to it with a larger cell than the last entry when that walk made no progress;
+// each pass thus takes a strictly later entry, and depth peeling ends.
+#version 330 core
+#include "common/precise.glsl"
+
+#ifndef ORTHO
+#define ORTHO 0
+#endif
+
+#include "common/camera_ray.glsl"
+#include "tetra/walk_cell.glsl"
+
+flat in int v_slot;
+flat in vec3 v_corner0;        // the face's corners (walk_entry.geom)
+flat in vec3 v_corner1;
+flat in vec3 v_corner2;
+uniform sampler2D t_state;     // per pixel: (t of the last stop (>= 1e38: done), the cell entered last
+                               // when that walk made no progress (else -1), 0, guard hits)
+uniform sampler2D t_nearest;   // the first draw's result: the nearest eligible entry t
+uniform bool u_pick_cell;      // false: write t; true: write the cell, where t is the nearest
+uniform usampler2D t_flags;    // R8UI per cell: bit 1 (2): zero volume (tetra/walk.frag)
+uniform bool u_start_faces;    // the faces of cells the orthographic start plane cuts: an
+                               // entry at t = 0 where the pixel's ray starts inside the cell
+uniform float u_start_margin;  // how far outside a cell a start still counts (float32 rounding)
+
+out vec4 frag_value;
+
+const float ENTRY_MARGIN = 1e-5;   // of the triangle's barycentric coordinates
+
+void main() {
+    vec4 state = texelFetch(t_state, ivec2(gl_FragCoord.xy), 0);
+    if (state.x >= 1.0e38) discard;            // this pixel's ray has ended
+    vec3 origin, dir;
+    pixelRay(origin, dir);
+    int cell = v_slot / 4;
+    int face = v_slot - 4 * cell;
+    mat3x4 normals;
+    vec4 room_at_eye, along, room, t;
+    cellPlanes(cell, u_eye, normals, room_at_eye);
+    cellCrossings(normals, room_at_eye, origin, dir, u_eye, along, room, t);
+    if (u_start_faces) {
+        if (any(lessThan(room, vec4(-u_start_margin)))) discard;
+        frag_value = vec4(u_pick_cell ? float(cell) : 0.0, 0.0, 0.0, 1.0);
+        if (u_pick_cell && texelFetch(t_nearest, ivec2(gl_FragCoord.xy), 0).r != 0.0) discard;
+        return;
+    }
+    // the ray goes in here where it crosses the plane inwards; a zero-volume cell's planes
+    // have no side, so crossing one of its boundary faces at all is an entry
+    bool zero_volume = (texelFetch(t_flags, texelRow(cell), 0).r & 2u) != 0u;
+    if (!(zero_volume ? along[face] != 0.0 : along[face] < 0.0)) discard;
+    float t_entry = t[face];
+    // the crossing inside the face's triangle (closed, with a margin of float32 rounding:
+    // the faces that share an edge overlap by it rather than leave a gap between them)
+    vec3 x = origin + t_entry * dir;
+    vec3 ab = v_corner1 - v_corner0, bc = v_corner2 - v_corner1, ca = v_corner0 - v_corner2;
+    vec3 m = cross(ab, -ca);
+    float mm = dot(m, m);
+    float margin = -ENTRY_MARGIN * mm;
+    if (dot(cross(ab, x - v_corner0), m) < margin || dot(cross(bc, x - v_corner1), m) < margin
+        || dot(cross(ca, x - v_corner2), m) < margin) discard;
+    if (!(t_entry > state.x || (t_entry == state.x && float(cell) > state.y))) discard;
+    if (u_pick_cell) {
+        if (t_entry != texelFetch(t_nearest, ivec2(gl_FragCoord.xy), 0).r) discard;
+        frag_value = vec4(float(cell), 0.0, 0.0, 1.0);
+    } else {
+        frag_value = vec4(t_entry, 0.0, 0.0, 1.0);
+    }
+}

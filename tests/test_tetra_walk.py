@@ -1,0 +1,360 @@
+"""Projected tetrahedra walked on the GPU (``technique="tetra", sort="walk"``,
+``dvr_gl.techniques.tetra_walk``): each pixel's ray goes from cell to cell through the
+face adjacency, no visibility sort; depth peeling of the boundary's entry faces for
+non-convex domains.
+
+Tolerances. The walk finds each cell's segment with tetra's own arithmetic (the same
+planes, the same float32 operations: tetra/walk_cell.glsl), so per segment its error is
+tetra's, and ``GL_TOL`` of test_tetra.py (1e-4, derived there) bounds it where a ray
+meets a dozen cells (the closed-form and small meshes below). What the walk adds is the
+order of compositing (front to back, one float32 rounding of 2^-24 relative per cell:
+at most 300 x 6e-8 = 2e-5 on the meshes here) and entries decided by the rasteriser at
+the boundary's silhouette (a pixel within its snapping of a silhouette edge has a chord
+of that order). On the NASA blunt fin (up to 210 cells on a ray) the tetra tests also hold
+GL to ``GL_TOL`` of exact (test_clip_tetra.py); the walk is held to the same against its
+twin and exact. The twin itself (the same segments in float64, composited in the order of
+distance) agrees with the exact image to 1e-7 wherever test_tetra.py says tetra's does.
+"""
+
+import os
+
+import numpy as np
+import pytest
+
+import dvr_gl
+from dvr_gl import Camera, Scene, TetMesh, TransferFunction, metrics, reference
+from dvr_gl.data import delaunay_ball, synthetic_tf
+from dvr_gl.model import mesh as M
+from dvr_gl.techniques import tetra, tetra_walk
+from dvr_gl.gl.context import current
+
+from test_tetra import CUBE, FIVE, GL_TOL, SIX, TF, VIEWS, blocks_mesh, closed_form_boxes, cube_mesh, _lattice_mesh
+
+
+def walk(renderer, scene):
+    """(image, plan) of one walk render, with the plan's pass counts."""
+    plan = tetra.make_plan(scene, sort="walk", tables=renderer.tables)
+    with current(renderer.ctx):
+        fbo = tetra.draw(renderer, plan)
+        image = renderer.read_target(fbo, scene.width, scene.height)
+    return image, plan
+
+
+@pytest.mark.parametrize("split", ["five", "six"])
+@pytest.mark.parametrize("view", sorted(VIEWS))
+def test_constant_cube_is_the_constant_box(renderer, split, view):
+    """No cracks, no double counting where the walk crosses shared faces, edges and
+    vertices (the diagonal views put rays in shared faces and along the cube's body
+    diagonal, an edge of all six cells of the six-way split); the eye inside."""
+    scene = Scene(cube_mesh(FIVE if split == "five" else SIX), TF, VIEWS[view], 49, 49)
+    img, plan = walk(renderer, scene)
+    want = closed_form_boxes(scene, [((0, 0, 0), (1, 1, 1))])
+    assert np.abs(img - want).max() < GL_TOL
+    assert img[..., 3].max() > 0.3
+    assert plan.walk_passes == 1 and tetra_walk.walk_counts(renderer, plan)[1] == 0   # convex: one layer, no guard
+
+
+def test_rays_through_lattice_vertices_and_edges(renderer):
+    """A 3 x 3 x 3 block of cubes seen along its body diagonal (orthographic, odd size):
+    the middle pixel's ray runs along the edges shared by six cells of every cube and
+    through four lattice vertices; others pass through edges between cubes. The walk
+    passes them with empty segments: the image is the box's closed form, no guard."""
+    cells = [(x, y, z) for x in range(3) for y in range(3) for z in range(3)]
+    mesh = blocks_mesh(cells)
+    cam = Camera((7.5, 7.5, 7.5), (1.5, 1.5, 1.5), up=(0, 0, 1), ortho_height=6.0)
+    scene = Scene(mesh, TF, cam, 33, 33)
+    img, plan = walk(renderer, scene)
+    want = closed_form_boxes(scene, [((0, 0, 0), (3, 3, 3))])
+    assert np.abs(img - want).max() < GL_TOL
+    assert img[16, 16, 3] > 0.6                         # the middle ray: the whole diagonal
+    steps, guarded = tetra_walk.walk_counts(renderer, plan)
+    assert guarded == 0 and steps.max() < 4 * mesh.n_tets
+
+
+def test_non_convex_meshes_are_peeled(renderer):
+    """An L of three cubes seen into its notch, and two separate blocks one behind the
+    other: a ray leaves the domain and enters it again; the next layer of entries picks
+    it up. The closed form; two layers where a ray meets both blocks, one more layer than
+    needed at most (the pass that finds no entry is not walked)."""
+    cam = Camera((4.5, 3.5, 4.0), (1.0, 0.8, 0.5), fov=35)
+    behind = Camera((9.5, 0.5, 6.5), (0.5, 0.5, 0.5), fov=20)       # along the line through both
+    for cells, view, layers in (([(0, 0, 0), (1, 0, 0), (0, 1, 0)], cam, (1, 2)), ([(0, 0, 0), (3, 0, 2)], cam, (1, 2)),
+                                ([(0, 0, 0), (3, 0, 2)], behind, (2,))):
+        scene = Scene(blocks_mesh(cells), TF, view, 48, 48)
+        img, plan = walk(renderer, scene)
+        want = closed_form_boxes(scene, [(c, np.add(c, 1)) for c in cells])
+        assert np.abs(img - want).max() < GL_TOL
+        assert plan.walk_passes in layers and plan.walk_left == 0
+
+
+def test_the_pass_cap_counts_what_it_leaves(renderer, monkeypatch):
+    """With one layer allowed, the block behind is not walked: the image is the front
+    block's alone, and the pixels that still had an entry are counted."""
+    cells = [(0, 0, 0), (0, 0, 3)]
+    cam = Camera((0.5, 0.5, 8.0), (0.5, 0.5, 0.0), fov=20)
+    scene = Scene(blocks_mesh(cells), TF, cam, 32, 32)
+    monkeypatch.setattr(tetra_walk, "MAX_PASSES", 1)
+    img, plan = walk(renderer, scene)
+    assert plan.walk_passes == 1 and plan.walk_left > 0
+    front = closed_form_boxes(scene, [((0, 0, 3), (1, 1, 4))])
+    assert np.abs(img - front).max() < GL_TOL
+
+
+def test_the_step_guard_ends_a_ray_and_is_counted(renderer, monkeypatch):
+    """The guard (more steps than cells: only a cycle made by rounding reaches it) ends
+    the ray where it is: forced down to 3 cells, rays that meet more are cut short,
+    counted, and what they composited so far is kept (less opacity, never more)."""
+    scene = Scene(cube_mesh(SIX), TF, VIEWS["perspective"], 32, 32)
+    whole, _ = walk(renderer, scene)
+    monkeypatch.setattr(tetra_walk, "max_steps", lambda mesh: 3)
+    cut, plan = walk(renderer, scene)
+    steps, guarded = tetra_walk.walk_counts(renderer, plan)
+    assert guarded > 0
+    assert (cut[..., 3] <= whole[..., 3] + 1e-7).all() and (cut[..., 3] < whole[..., 3] - 1e-3).any()
+
+
+def test_zero_volume_cells_and_slivers(renderer):
+    """A flat cell glued to the cube's bottom face changes nothing; slivers 1e-6 thick
+    glued below it, seen from above, below and grazing: GL within its bound of exact.
+    The lattice Delaunay has layers of flat cells inside, which the walk passes through."""
+    mesh = cube_mesh(SIX)
+    pts = np.vstack([mesh.points, [[0.5, 0.25, 0.0]]])
+    flat = TetMesh(pts, np.vstack([mesh.tets, [[0, 1, 3, 8]]]), np.concatenate([mesh.scalars, [0.5]]))
+    scene = Scene(mesh, TF, VIEWS["perspective"], 40, 40)
+    assert np.abs(walk(renderer, scene.replace(volume=flat))[0] - walk(renderer, scene)[0]).max() < GL_TOL
+    apex = [[0.6, 0.3, -1e-6], [0.3, 0.6, -1e-6]]
+    bottom = [t for t in SIX if sum(CUBE[i][2] == 0 for i in t) == 3]
+    faces = [[i for i in t if CUBE[i][2] == 0] for t in bottom]
+    sliver = TetMesh(np.vstack([mesh.points, apex]), np.vstack([mesh.tets, [faces[0] + [8]], [faces[1] + [9]]]),
+                     np.full(10, 0.5))
+    for cam in (Camera((0.5, 0.5, 3.0), (0.5, 0.5, 0.5), fov=40), Camera((0.7, 0.2, -2.5), (0.5, 0.5, 0.5), fov=40),
+                Camera((-2.0, -1.5, 0.0), (0.5, 0.5, 0.0), up=(0, 0, 1), fov=50)):
+        s = Scene(sliver, TF, cam, 40, 40)
+        assert np.abs(walk(renderer, s)[0] - reference.exact(s)).max() < GL_TOL
+    lattice = _lattice_mesh((4, 4, 4), (1, 1, 1))
+    assert M.topology(lattice).flat.sum() > 0
+    lo, hi = float(lattice.scalars.min()), float(lattice.scalars.max())
+    tf = TransferFunction(color=[(lo, 0.2, 0.3, 0.9), (hi, 0.9, 0.3, 0.2)], opacity=[(lo, 0.3), (hi, 0.9)],
+                          unit_distance=0.5)
+    for az, el in ((30, 20), (0, 0), (90, 45)):
+        s = Scene(lattice, tf, dvr_gl.default_camera(lattice, azimuth=az, elevation=el), 40, 40)
+        exact = reference.exact(s)
+        assert np.abs(reference.render(s, technique="tetra", sort="walk") - exact).max() < 1e-7
+        img, plan = walk(renderer, s)
+        assert np.abs(img - exact).max() < GL_TOL and tetra_walk.walk_counts(renderer, plan)[1] == 0
+
+
+def test_folded_cells_are_walked_as_their_union(renderer):
+    """test_tetra.py's folded pair (two cells sharing a face, both on one side of it, the
+    second inside the first): no plane of either says the ray crosses into the other, so
+    the walk neither enters the union through the shared face (unless it is an entry face
+    too) nor passes the ray back and forth across it (the combustor's four folded cells
+    did, 10,000 steps a pixel). The walk counts the covered length once, as the exact
+    image does (projection counts the overlap twice: 0.07 off there)."""
+    pts = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [0.2, 0.25, 0.3]], float)
+    mesh = TetMesh(pts, np.array([[0, 1, 2, 3], [1, 2, 3, 4]]), np.full(5, 0.5))
+    assert tetra_walk.folded_faces(mesh).sum() == 2
+    for cam in (Camera((2.0, 1.5, 1.8), (0.3, 0.3, 0.3), fov=35), Camera((-1.5, -1.0, -1.2), (0.3, 0.3, 0.3), fov=35)):
+        scene = Scene(mesh, TF, cam, 40, 40)
+        img, plan = walk(renderer, scene)
+        assert np.abs(img - reference.exact(scene)).max() < GL_TOL
+        assert img[..., 3].max() > 0.2
+        steps, guarded = tetra_walk.walk_counts(renderer, plan)
+        assert guarded == 0 and steps.max() <= 4
+
+
+def _ball(view="perspective", mode="composite", size=48, **extra):
+    mesh = delaunay_ball()
+    lo, hi = mesh.bounds
+    centre = (lo + hi) / 2
+    cams = {"perspective": dvr_gl.default_camera(mesh, azimuth=30, elevation=20),
+            "orthographic": dvr_gl.default_camera(mesh, azimuth=60, elevation=-10, ortho=True),
+            "eye inside": Camera(centre + [8.0, -5.0, 3.0], centre + [-10.0, 10.0, 0.0], fov=70)}
+    return Scene(mesh, synthetic_tf(), cams[view], size, size, mode=mode, **extra)
+
+
+@pytest.mark.parametrize("view,mode", [(v, "composite") for v in ("perspective", "orthographic", "eye inside")]
+                         + [("perspective", m) for m in ("mip", "minip", "average")] + [("eye inside", "mip")])
+def test_ball_against_twin_exact_and_mpvo(renderer, view, mode):
+    """The bundled Delaunay ball: the walk against its twin, against the exact image and
+    against tetra's MPVO draw; with the eye inside the ball, the first layer starts every
+    ray in the eye's cell (found on the CPU)."""
+    scene = _ball(view, mode)
+    img, plan = walk(renderer, scene)
+    twin = reference.render(scene, technique="tetra", sort="walk")
+    assert np.abs(img - twin).max() < GL_TOL
+    assert np.abs(twin - reference.render(scene, technique="tetra")).max() < 1e-9    # same segments
+    assert np.abs(img - renderer.render(scene, technique="tetra", sort="mpvo")).max() < GL_TOL
+    if mode == "composite":
+        assert np.abs(img - reference.exact(scene)).max() < GL_TOL
+    if mode in ("composite", "mip"):
+        assert img[..., 3].max() > 0.2
+    if view == "eye inside":
+        assert tetra_walk.eye_cell(scene.volume, scene.camera, M.topology(scene.volume).cell_planes()) >= 0
+
+
+def test_clips_geometry_shading_and_optical_models_as_tetra_draws_them(renderer):
+    """Clip planes and a crop box cut each segment to the ray's kept interval, an opaque
+    surface at its t_hit (the same rasterised t as tetra's), with the surface behind;
+    lights and the absorption-only and emission-only models. The walk against tetra's
+    MPVO draw of the same scene (both GL: the same t_hit and kept interval), within GL_TOL,
+    and the clipped walk against its twin."""
+    mesh = delaunay_ball()
+    lo, hi = mesh.bounds
+    centre = (lo + hi) / 2
+    from test_geometry import icosphere
+    radius = 0.3 * float(np.min(hi - lo))
+    cases = [dict(clip_planes=[(centre, (1.0, 0.3, 0.2))]),
+             dict(crop_box=(lo + 0.2 * (hi - lo), lo + 0.7 * (hi - lo))),
+             dict(geometry=[icosphere(centre, radius)]),
+             dict(geometry=[icosphere(centre, radius)], mode="mip"),
+             dict(shading=True), dict(optical_model="absorption"), dict(optical_model="emission")]
+    for extra in cases:
+        scene = _ball(size=40, **extra)
+        img, _ = walk(renderer, scene)
+        mpvo = renderer.render(scene, technique="tetra", sort="mpvo")
+        assert np.abs(img - mpvo).max() < GL_TOL, extra
+        assert img[..., 3 if extra.get("optical_model") == "absorption" else 0].max() > 0.05, extra
+        if "geometry" not in extra:
+            assert np.abs(img - reference.render(scene, technique="tetra", sort="walk")).max() < GL_TOL, extra
+
+
+@pytest.mark.parametrize("ortho", [True, False])
+def test_a_thin_slab_seen_grazing_keeps_every_entry(renderer, ortho):
+    """test_tetra.py's Delaunay slab 2e-3 thick seen 1e-4 off its plane: its boundary
+    faces project to needles that rasterisation leaves pixel centres beside; drawn as their
+    grown bounding boxes with the fragment deciding (walk_entry.geom), no entry is lost
+    (0.11 off the reference before). The reference is exact here (a constant field)."""
+    rng = np.random.default_rng(1)
+    points = rng.uniform(-1, 1, (40, 3))
+    points[:, 1] *= 1e-3
+    mesh = TetMesh.from_points(points, np.zeros(40))
+    tf = TransferFunction([(0, 0.2, 0.6, 1.0)], [(0, 0.7)], unit_distance=2.9)
+    d = np.array([1.0, 1e-4, 0.97])
+    d /= np.linalg.norm(d)
+    cam = Camera(d * 4, (0, 0, 0), ortho_height=2.6) if ortho else Camera(d * 4, (0, 0, 0), fov=40)
+    scene = Scene(mesh, tf, cam, 37, 23)
+    ref = reference.render(scene, technique="tetra", sort="walk")
+    assert ref[..., 3].max() > 0.5
+    assert np.abs(walk(renderer, scene)[0] - ref).max() < GL_TOL
+
+
+def _bluntfin():
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    data = os.environ.get("DVR_GL_DATA") or os.path.join(os.path.dirname(root), "shared", "data")
+    if not os.path.exists(os.path.join(data, "nasa_bluntfin", "bluntfin_tets.npz")):
+        pytest.skip("the shared data folder is not beside the checkout (or at $DVR_GL_DATA)")
+    from dvr_gl.bench.common import load_mesh_dataset
+    return load_mesh_dataset("bluntfin", data)
+
+
+def test_nasa_blunt_fin_is_peeled_and_exact(renderer):
+    """NASA's blunt fin (a curvilinear CFD grid split into tets: non-convex around the
+    fin, with zero-volume cells): rays leave and re-enter, two layers; the walk within
+    GL_TOL of its twin and of exact, its RMSE against exact within 3x tetra MPVO's (both
+    are float32 arithmetic on the same segments), no guard reached."""
+    mesh, tf = _bluntfin()
+    scene = Scene(mesh, tf, dvr_gl.default_camera(mesh, azimuth=30, elevation=20), 48, 48)
+    img, plan = walk(renderer, scene)
+    exact = reference.exact(scene)
+    twin = reference.render(scene, technique="tetra", sort="walk")
+    assert plan.walk_passes >= 2 and plan.walk_left == 0 and tetra_walk.walk_counts(renderer, plan)[1] == 0
+    assert np.abs(twin - exact).max() < 1e-7
+    assert np.abs(img - twin).max() < GL_TOL
+    assert np.abs(img - exact).max() < GL_TOL
+    mpvo = renderer.render(scene, technique="tetra", sort="mpvo")
+    assert metrics.rmse(img, exact) < 3 * max(metrics.rmse(mpvo, exact), 1e-7)
+    assert img[..., 3].max() > 0.2
+
+
+@pytest.mark.parametrize("mode", ["composite", "mip"])
+def test_orthographic_rays_that_start_inside_the_mesh(renderer, mode):
+    """An orthographic view whose start plane cuts the mesh: each ray starts in the cell
+    that holds its start (the faces of the cells the plane cuts are drawn in the first
+    entry pass, start_faces). The cube from its middle, looking along an axis and along
+    its diagonal (starts on shared faces and edges), against exact; the ball from inside,
+    against its twin."""
+    cube = cube_mesh(SIX)
+    for cam in (Camera((0.5, 0.5, 0.5), (0.5, 0.5, -1.0), ortho_height=1.5),
+                Camera((0.5, 0.5, 0.5), (3.0, 3.0, 3.0), up=(0, 0, 1), ortho_height=1.5)):
+        scene = Scene(cube, TF, cam, 41, 41, mode=mode)
+        assert tetra_walk.start_faces(cube, cam, None) is not None
+        img, plan = walk(renderer, scene)
+        assert np.abs(img - reference.exact(scene)).max() < GL_TOL
+        assert img[..., 3].max() > 0.2
+    ball = delaunay_ball()
+    lo, hi = ball.bounds
+    centre = (lo + hi) / 2
+    scene = Scene(ball, synthetic_tf(), Camera(centre + [3.0, -2.0, 1.0], centre + [-10.0, 10.0, 0.0], ortho_height=40.0),
+                  40, 40, mode=mode)
+    img, plan = walk(renderer, scene)
+    assert np.abs(img - reference.render(scene, technique="tetra", sort="walk")).max() < GL_TOL
+    assert img[..., 3].max() > 0.4 and tetra_walk.walk_counts(renderer, plan)[1] == 0
+
+
+def test_what_the_walk_does_not_do_is_a_named_error(renderer, monkeypatch):
+    """Cell numbers travel as float32: a mesh of 2^24 cells or more is refused by name,
+    with what to use instead (here the limit is lowered to the cube's six cells). The
+    option is listed and checked."""
+    mesh = cube_mesh(SIX)
+    scene = Scene(mesh, TF, VIEWS["perspective"], 16, 16)
+    monkeypatch.setattr(tetra_walk, "MAX_CELLS", 6)
+    with pytest.raises(tetra_walk.WalkUnsupported, match="sort='walk' takes meshes of fewer than 6 tets.*centroid"):
+        renderer.render(scene, technique="tetra", sort="walk")
+    monkeypatch.undo()
+    assert "walk" in tetra.SORTS
+    with pytest.raises(ValueError, match="sort must be one of mpvo, centroid, walk"):
+        tetra.make_plan(scene, sort="bsp")
+
+
+def test_mesh_data_uploaded_once_and_no_cpu_order(renderer, monkeypatch):
+    """Per view the CPU makes no order: MPVO and the centroid sort are never called; the
+    walk's own per-mesh data (neighbours, boundary faces) are made once for many views."""
+    mesh = cube_mesh(FIVE, value=0.25)
+    scene = Scene(mesh, TF, VIEWS["perspective"], 16, 16)
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("the walk sorted on the CPU")
+
+    monkeypatch.setattr(tetra, "mpvo_order", refuse)
+    monkeypatch.setattr(tetra, "centroid_order", refuse)
+    before = len([c for c in renderer.created if c[0] == "tetra_walk_mesh"])
+    for cam in (VIEWS["perspective"], VIEWS["along_z"], VIEWS["body_diagonal"]):
+        renderer.render(scene.replace(camera=cam), technique="tetra", sort="walk")
+    assert len([c for c in renderer.created if c[0] == "tetra_walk_mesh"]) == before + 1
+
+
+def test_neighbours_and_boundary_faces():
+    """The adjacency the walk follows: across local face k of cell c lies the cell that
+    shares those three points (or -1), symmetric; the boundary faces are the faces of one
+    cell only, each with its cell and local face."""
+    mesh = blocks_mesh([(0, 0, 0), (1, 0, 0)])
+    topo = M.topology(mesh)
+    nb = tetra_walk.neighbours(mesh)
+    for c in range(mesh.n_tets):
+        for k in range(4):
+            face = set(np.delete(topo.tets[c], k).tolist())
+            others = [d for d in range(mesh.n_tets) if d != c and face <= set(topo.tets[d].tolist())]
+            assert nb[c, k] == (others[0] if others else -1)
+            if nb[c, k] >= 0:
+                assert c in nb[nb[c, k]]
+    faces = tetra_walk.boundary_faces(mesh).reshape(-1, 3)
+    assert len(faces) == (nb < 0).sum()
+    slots = faces["slot"][:, 0]
+    assert (nb.reshape(-1)[slots] == -1).all()
+
+
+def test_tiles_give_the_same_pixels():
+    """An image larger than one target is rendered in tiles, each a window of the same
+    camera: the walk's passes per tile give exactly the single render's pixels, the
+    orthographic start inside the mesh included."""
+    ball = delaunay_ball()
+    lo, hi = ball.bounds
+    centre = (lo + hi) / 2
+    scene = _ball(size=40).replace(width=50)
+    inside = scene.replace(camera=Camera(centre, centre + [0, 0, -5.0], ortho_height=60.0))
+    with dvr_gl.Renderer() as whole, dvr_gl.Renderer(max_tile=24) as tiled:
+        for s in (scene, inside):
+            img = whole.render(s, technique="tetra", sort="walk")
+            assert img[..., 3].max() > 0.5
+            assert np.array_equal(tiled.render(s, technique="tetra", sort="walk"), img)
