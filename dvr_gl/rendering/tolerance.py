@@ -30,9 +30,24 @@ it is crossed. Each way's choice is then rendered at up to ``TIMING_SIDE`` pixel
 estimate (``PREINTEGRATION_COST``) favours by ``TIMING_MARGIN``: what a refined segment
 costs depends on how many the TF's detail touches, so it is measured rather than
 assumed, and a close call stays with the estimate, since small frames time noisily.
-``SAFETY`` (0.7) covers what a pilot's pixels do not see of the full image. What was chosen
-and predicted is on ``Renderer.last_choice``; the error model is kept per scene, view and
-options, so another tolerance or a repeated frame costs no pilot.
+``SAFETY`` (0.7) aims the pilot's choice below ``E``; what the pilot's pixels do not see
+is then checked, not assumed (``checked``): the chosen step is rendered at the request's
+own size up to ``CHECK_SIDE`` pixels a side, with the caller's options, beside a
+Richardson image of that size from 1/4 and 1/8 voxel (and finer, down to
+``FINEST_REFERENCE``, while its estimated error is over ``REFERENCE_SHARE`` of the
+target), and its error bound must be within ``CHECK_TARGET * E``. The bound is the
+measured RMSE plus the Richardson image's own estimated error and, where the check is smaller than the request, a sampling margin: the
+mean of per-tile squared errors plus ``CHECK_Z`` standard errors of that mean, so that an
+error held in a few tiles earns a wider margin. A step that fails is shortened by the
+observed order (``CHECK_ROUNDS`` at most). Requests up to ``CHECK_SIDE`` are so checked
+on the very pixels they return.
+
+The error model, the way of sampling and its timing carry over views and sizes: they are
+kept per volume, TF and options (``family_key``), so a new view or size costs only its
+check (three frames at ``CHECK_SIDE``), not a pilot. Ways other than plain samples are
+weighed only where plain samples would need steps under ``OTHER_WAYS_BELOW`` voxel (a
+frame four times as dear as a plain one at the default half voxel): their tables (0.3 to 0.8 s
+each, one per step) cost most of a first answer. What was chosen and predicted is on ``Renderer.last_choice``.
 """
 
 from __future__ import annotations
@@ -58,6 +73,14 @@ REFINE_PARTS = 4                         # parts of a refined pre-integrated seg
 TIMING_SIDE = 256
 TIMING_REPEATS = 5
 TIMING_MARGIN = 0.15
+CHECK_SIDE = 128                         # the check of a choice: the request's view at up to this size
+CHECK_TARGET = 0.95                      # the check's error bound must be within this fraction of E
+CHECK_Z = 2.0                            # standard errors of the per-tile mean in the sampling margin
+CHECK_TILE = 8                           # pixels a side of a tile of the check image
+CHECK_ROUNDS = 3                         # check frames at shorter steps, at most
+REFERENCE_SHARE = 0.25                   # a check's reference is refined until its error is within this share
+FINEST_REFERENCE = 1.0 / 32.0            # of the check's target, down to this step (voxels)
+OTHER_WAYS_BELOW = 0.125                 # voxels: weigh pre-integrated ways only under this plain step
 
 
 @dataclass(frozen=True)
@@ -75,6 +98,9 @@ class Choice:
     preintegrate: bool = False
     refine: int = 1
     frame_seconds: float = None    # the frame time it was picked on, at TIMING_SIDE (None: not timed)
+    checked_rmse: float = None     # the check's error bound at this view and step (None: not checked)
+    check_size: tuple = None       # the check image's (width, height)
+    reused_model: bool = False     # the error model and way came from another view or size
 
     @property
     def sampling(self):
@@ -182,6 +208,8 @@ class ErrorModel:
     pilot_size: tuple
     pilot_seconds: float
     reference: object = None       # the Richardson image of the pilot, float64
+    pilot: object = None           # the pilot Scene the model was measured on
+    reference_error: float = 0.0   # the estimated RMSE of the finest pilot image (bounds the reference's)
     choices: dict = field(default_factory=dict)   # (tolerance, preintegrate) -> the verified Choice
 
     def with_point(self, step, error, seconds=0.0):
@@ -189,7 +217,8 @@ class ErrorModel:
         points = sorted(zip(self.steps + (step,), self.errors + (error,)), reverse=True)
         return ErrorModel(order=self.order, steps=tuple(p[0] for p in points), errors=tuple(p[1] for p in points),
                           pilot_size=self.pilot_size, pilot_seconds=self.pilot_seconds + seconds,
-                          reference=self.reference, choices=dict(self.choices))
+                          reference=self.reference, pilot=self.pilot, reference_error=self.reference_error,
+                          choices=dict(self.choices))
 
     def _curve(self):
         """(log steps, log errors) ascending in step, errors made non-decreasing with the
@@ -243,11 +272,11 @@ def measure(render, scene):
     voxel = scene.volume.min_spacing
     images = [render(pilot, k * voxel) for k in PILOT_STEPS]
     # the order from the two finest differences: the closest to the asymptotic regime
-    p, _ = error_model(rmse(images[-3], images[-2]), rmse(images[-2], images[-1]))
+    p, finest = error_model(rmse(images[-3], images[-2]), rmse(images[-2], images[-1]))
     reference = richardson(images, p)
     return ErrorModel(order=p, steps=PILOT_STEPS, errors=tuple(rmse(im, reference) for im in images),
                       pilot_size=(pilot.width, pilot.height), pilot_seconds=time.perf_counter() - t0,
-                      reference=reference)
+                      reference=reference, pilot=pilot, reference_error=finest)
 
 
 def verified(model, render, scene, tolerance, sampling=PLAIN):
@@ -277,7 +306,8 @@ def verified(model, render, scene, tolerance, sampling=PLAIN):
             if error is not None:
                 break
             t0 = time.perf_counter()
-            error = rmse(render(pilot_scene(scene), choice.step), model.reference)
+            pilot = model.pilot if model.pilot is not None else pilot_scene(scene)
+            error = rmse(render(pilot, choice.step), model.reference)
             model = model.with_point(choice.step_voxels, error, time.perf_counter() - t0)
             if error <= target:
                 break
@@ -308,3 +338,167 @@ def choose_step(model, scene, tolerance, sampling=PLAIN):
     return Choice(tolerance=tolerance, step=steps * scene.volume.min_spacing, step_voxels=steps,
                   predicted_rmse=model.predict(steps), order=model.order, pilot_size=model.pilot_size,
                   pilot_seconds=model.pilot_seconds, **dict(PLAIN, **sampling))
+
+
+def family_key(scene, options):
+    """What the error model and the way of sampling are kept under: the scene with its
+    camera and size left out (volume, TF, mode, lighting, clipping ...) and the caller's
+    options. The step's error per voxel depends on the data and TF far more than on the
+    view; each view is checked on its own (``checked``)."""
+    from ..model.camera import default_camera
+    neutral = scene.replace(camera=default_camera(scene.volume), width=8, height=8)
+    return (neutral.digest(), repr(sorted(options.items())))
+
+
+def check_scene(scene):
+    """The view a choice is checked on: the request itself up to CHECK_SIDE pixels a side."""
+    return scaled_scene(scene, CHECK_SIDE)
+
+
+def error_bound(image, reference, reference_error=0.0, sampled=False):
+    """An upper bound of the RMSE of the image this check stands for: the RMSE of
+    ``image`` against ``reference`` plus the reference's own estimated error and, when
+    the check image is a smaller sample of the request (``sampled``), CHECK_Z standard
+    errors of the mean of its tiles' squared errors (tiles, not pixels: neighbouring
+    pixels' errors go together); an error held in a few tiles widens the margin."""
+    squared = np.mean((np.asarray(image, np.float64) - reference) ** 2, axis=-1)   # per pixel, channels averaged
+    mse = float(squared.mean())
+    if sampled:
+        rows = np.array_split(squared, max(1, squared.shape[0] // CHECK_TILE), axis=0)
+        tiles = np.array([t.mean() for r in rows for t in np.array_split(r, max(1, r.shape[1] // CHECK_TILE), axis=1)])
+        if tiles.size > 1:
+            mse += CHECK_Z * float(tiles.std(ddof=1)) / math.sqrt(tiles.size)
+    return math.sqrt(mse) + reference_error
+
+
+@dataclass(frozen=True, eq=False)
+class ViewReference:
+    """The Richardson image of one check view (``scene``) from its frames at ``steps``
+    (voxels, the finest frame kept in ``finest``) and its estimated error (the finest
+    frame's: the extrapolated image is better still); the error bounds measured against
+    it are kept by step (voxels) and whether the check is a sample of a larger request in
+    ``bounds``."""
+    scene: object
+    image: object
+    error: float
+    steps: tuple
+    finest: object
+    bounds: dict = field(default_factory=dict)
+
+
+def view_reference(render, check, order, steps=PILOT_STEPS[-2:]):
+    """The Richardson image of ``check`` from its frames at ``steps`` (voxels, the
+    coarser first) with the model's ``order``."""
+    voxel = check.volume.min_spacing
+    images = [np.asarray(render(check, k * voxel), np.float64) for k in steps]
+    return ViewReference(check, richardson(images, order), rmse(images[0], images[1]) / (2.0 ** order - 1.0),
+                         tuple(steps), images[-1])
+
+
+def finer_reference(reference, render, order):
+    """``reference`` with one more frame at half its finest step."""
+    voxel = reference.scene.volume.min_spacing
+    step = reference.steps[-1] / 2
+    images = [reference.finest, np.asarray(render(reference.scene, step * voxel), np.float64)]
+    return ViewReference(reference.scene, richardson(images, order), rmse(*images) / (2.0 ** order - 1.0),
+                         reference.steps + (step,), images[-1])
+
+
+def checked(choice, reference, render, scene, tolerance, model, sampled):
+    """``choice`` checked on the request's view: its step rendered by ``render`` (the
+    caller's own options) at the check size, and its error bound (``error_bound``) kept
+    within CHECK_TARGET * ``tolerance``; a step that fails is shortened by the model's
+    order (with a tenth more) and rendered again, CHECK_ROUNDS times at most. A step
+    under the reference's finest is not checked (the reference is no better than it):
+    ``checked_rmse`` is None then."""
+    target = CHECK_TARGET * tolerance
+    voxel = scene.volume.min_spacing
+    k = choice.step_voxels
+    bound = None
+    for _ in range(CHECK_ROUNDS + 1):
+        if k < reference.steps[-1] * (1 - 1e-9):
+            bound = None
+            break
+        bound = reference.bounds.get((k, sampled))     # a request larger than the check adds a margin
+        if bound is None:
+            bound = error_bound(render(reference.scene, k * voxel), reference.image, reference.error, sampled)
+            reference.bounds[k, sampled] = bound
+        if bound <= target:
+            break
+        k = max(k * 0.9 * (target / bound) ** (1.0 / model.order), MIN_STEP)
+    else:
+        bound = None
+    return dataclasses.replace(choice, step=k * voxel, step_voxels=k, predicted_rmse=min(choice.predicted_rmse,
+                               model.predict(k)), checked_rmse=bound,
+                               check_size=(reference.scene.width, reference.scene.height))
+
+
+def settings(renderer, scene, tolerance, technique, options):
+    """The Choice for ``renderer.render(scene, tolerance=...)``: the error model of each
+    way of sampling, measured once per ``family_key`` (on the first view asked) and kept
+    in ``renderer._error_models``; the way picked per family and tolerance, kept in
+    ``renderer._tolerance_picks``; and each view's check (``checked``)."""
+    from ..techniques import check_options
+    if technique != "raycast":
+        raise ValueError(f"tolerance chooses the ray caster's step; technique {technique!r} takes its "
+                         f"own options (use technique='raycast')")
+    check_options(technique, options)
+    tolerance = check_tolerance(tolerance)
+    options = dict(options)
+    fixed = None
+    if "preintegrate" in options or "refine" in options:      # the caller's say is kept
+        fixed = {"preintegrate": bool(options.pop("preintegrate", False)), "refine": options.pop("refine", 1)}
+    family = family_key(scene, options)
+    check = check_scene(scene)
+    sampled = (check.width, check.height) != (scene.width, scene.height)
+    pilot_digest = pilot_scene(scene).digest()
+    models = renderer._error_models
+
+    def render_with(sampling, **extra):
+        # the pilot and the references measure the step's error alone (no early termination)
+        opts = dict(options, **sampling, **extra)
+        return lambda s, h: renderer.render(s, technique, step=h, **opts)
+
+    def view_choice(sampling, on_view=True):
+        way = tuple(sorted(sampling.items()))
+        key = ("model",) + family + (way,)
+        pilot = render_with(sampling, ert_transmittance=0.0)
+        model = models.get(key, lambda: measure(pilot, scene))
+        model, chosen = verified(model, pilot, scene, tolerance, sampling)
+        models.put(key, model)
+        if not on_view:
+            return chosen
+        view_key = ("view", check.digest()) + family[1:] + (way,)
+        reference = models.get(view_key, lambda: view_reference(pilot, check, model.order))
+        # the reference's own error counts against the request: made finer where it is a large share
+        while (reference.error > REFERENCE_SHARE * CHECK_TARGET * tolerance
+               and reference.steps[-1] > FINEST_REFERENCE * (1 + 1e-9)):
+            reference = finer_reference(reference, pilot, model.order)
+            models.put(view_key, reference)
+        chosen = checked(chosen, reference, render_with(sampling), scene, tolerance, model, sampled)
+        return dataclasses.replace(chosen, reused_model=model.pilot is not None and model.pilot.digest() != pilot_digest)
+
+    if fixed is not None:
+        return view_choice(fixed)
+    pick_key = family + (tolerance,)
+    picked = renderer._tolerance_picks.items.get(pick_key)
+    if picked is not None:        # the way picked on another view or size
+        renderer._tolerance_picks.items.move_to_end(pick_key)
+        return dataclasses.replace(view_choice(picked.sampling), frame_seconds=picked.frame_seconds)
+    plain = view_choice(PLAIN)
+    ways = samplings(scene)
+    if len(ways) == 1 or plain.step_voxels >= OTHER_WAYS_BELOW:
+        picked = plain
+    else:
+        timed = timing_scene(scene)
+
+        def frame_seconds(chosen):
+            return median_seconds(lambda: renderer.render(timed, technique, step=chosen.step,
+                                                          **dict(options, **chosen.sampling)))
+        # the other ways are timed at their pilot's step and only the one picked is checked:
+        # each way's check needs tables of its own for the reference's steps
+        picked = fastest([plain] + [view_choice(way, on_view=False) for way in ways[1:]], frame_seconds)
+        if picked.sampling != plain.sampling:
+            picked = dataclasses.replace(view_choice(picked.sampling), frame_seconds=picked.frame_seconds)
+    renderer._tolerance_picks.put(pick_key, picked)
+    return picked
