@@ -18,8 +18,11 @@ decide otherwise (test_geometry's ``coverage_and_reach``: a ray 2^-7 px off the 
 meets another face, or none) are left out and counted (at most twice the area of those
 bands, as test_geometry.py asserts); silhouette pixels outside the bands are compared.
 Elsewhere the bound is the kernel's own, plus the terms test_geometry.py derives for a
-rasterised t_hit (off the float64 hit by ``dt = spread * 16 u max(W, H) / REACH + 8 u (t +
-|eye| + diagonal)``) and the float32 lit colour (``64 u (lit + ks n)``):
+rasterised t_hit (off the float64 hit by ``dt = spread * window / REACH + 8 u (t + |eye| +
+diagonal)``, ``window`` 16 u max(W, H) px on llvmpipe, which interpolates from the float
+positions, and where a rasteriser may interpolate from vertices snapped to its sub-pixel
+grid twice half its step: ``window_rounding``; the tent's far larger terms take
+test_geometry's llvmpipe figure) and the float32 lit colour (``64 u (lit + ks n)``):
 
 - tent: tests/test_splat.py's ``tent_tolerance`` over the shortened rays (the sheets the
   twin draws, the straddling piece's length), plus two of 3D slicing's per-sample bounds
@@ -52,6 +55,7 @@ from dvr_gl import metrics, reference
 from dvr_gl.reference.common import box_rays
 from dvr_gl.reference.exact_geometry import surface_hits
 from dvr_gl.reference.splat import clip_rounding, surface_rounding
+from dvr_gl.gl.context import current
 from dvr_gl.techniques import raycast, splat
 
 import test_splat
@@ -67,11 +71,27 @@ def _lit(scene):
     return max(float(np.max(s.color)) for s in scene.geometry) * (ka + kd) + ks
 
 
-def _surface_dt(scene, spread, t):
-    """How far GL's rasterised t_hit may be from the float64 hit (test_geometry)."""
+def window_rounding(renderer, scene):
+    """How far, in pixels, the point a rasterised surface's position is interpolated at
+    may lie from the pixel centre, to be scaled by ``spread / REACH`` (t's change over
+    ``REACH`` px along x or y). llvmpipe interpolates from the float positions: 16 u of
+    the image's size (measured, ``test_geometry.surface_tolerance``). GL lets a rasteriser
+    interpolate from the vertices snapped to its sub-pixel grid (GL_SUBPIXEL_BITS), each
+    moved by up to half a grid step per axis: the point moves by as much per axis (a convex
+    combination of the moves), t by that times its slope along x plus along y, so twice
+    the step's half (an NVIDIA GPU, 8 bits: t off the float64 hit by up to 0.64 of it)."""
+    with current(renderer.ctx):
+        info = renderer.ctx.info
+    if "llvmpipe" in (info.get("GL_RENDERER") or ""):
+        return 16 * U32 * max(scene.width, scene.height)
+    return 2 * 2.0 ** -(int(info.get("GL_SUBPIXEL_BITS") or 4) + 1)
+
+
+def _surface_dt(scene, spread, t, window):
+    """How far GL's rasterised t_hit may be from the float64 hit (test_geometry), the
+    window position's rounding ``window`` px (``window_rounding``)."""
     lo = scene.volume.bounds[0]
     eye = float(np.linalg.norm(scene.camera.eye - lo))
-    window = 16 * U32 * max(scene.width, scene.height)
     return spread * window / REACH + 8 * U32 * (np.where(np.isfinite(t), t, 0.0) + eye
                                                 + float(np.linalg.norm(scene.volume.extent)))
 
@@ -94,12 +114,12 @@ def tent_bound(plan, spread, t):
     return base + ends + surface_tolerance(ray, spread, t) - derived_tolerance(ray)
 
 
-def gaussian_bound(plan, spread, t):
+def gaussian_bound(plan, spread, t, window):
     """(H, W): the Gaussian kernel's bound plus the surface's terms (module docstring)."""
     scene = plan.scene
     ka, kd, ks, n = scene.phong
     lit = _lit(scene)
-    moved = surface_rounding(plan, _surface_dt(scene, spread, t))
+    moved = surface_rounding(plan, _surface_dt(scene, spread, t, window))
     return (gaussian_tolerance(scene, plan)[..., 0] + clip_rounding(plan) + (1 + lit) * moved
             + 64 * U32 * (lit + ks * n))
 
@@ -135,7 +155,8 @@ def check_against_twin(renderer, scene, min_share=0.03, **options):
     twin = reference.render(scene, "splat", **options)
     plan = splat.make_plan(scene, **options)
     ambiguous, hit, spread, t = _coverage(scene)
-    tol = tent_bound(plan, spread, t) if plan.kernel == "tent" else gaussian_bound(plan, spread, t)
+    tol = (tent_bound(plan, spread, t) if plan.kernel == "tent"
+           else gaussian_bound(plan, spread, t, window_rounding(renderer, scene)))
     error = np.abs(gl - twin).max(axis=-1)
     compared = ~ambiguous
     assert hit.sum() > min_share * hit.size                          # the surface is in the picture
@@ -197,7 +218,8 @@ def test_a_constant_box_with_a_square_inside_is_the_closed_form(renderer):
     lit = _lit(scene)
     ka, kd, ks, n = scene.phong
     tol = (64 * U32 * (float(chord.max()) / plan.step + 3) + tau * 8 * U32 * float(t1[chord > 0].max())
-           + (1 + lit) * tau * _surface_dt(scene, spread, t) + 64 * U32 * (lit + ks * n))
+           + (1 + lit) * tau * _surface_dt(scene, spread, t, window_rounding(renderer, scene))
+           + 64 * U32 * (lit + ks * n))
     x, y = pixel_xy(scene)
     assert (hit & inside(x, y, 0, 15, 0, 11)).sum() > 50 and (hit & ~inside(x, y, 0, 15, 0, 11)).sum() > 20
     error = np.abs(gl - exact).max(axis=-1)

@@ -251,21 +251,27 @@ def test_clip_plane_cuts_every_layer(renderer):
 def test_a_surface_ends_every_layer(renderer, blend):
     """A sphere inside the head and the labels: the rays end at it, its colour behind the
     sum. Pixels whose coverage the rasteriser's snapping can change are left out
-    (``test_geometry.coverage_and_reach``); elsewhere the ray's end moves by float32
-    rounding, 8 u (t + |eye| + diagonal), which changes a pixel by at most ``end_rate`` per
-    unit length per layer."""
-    from test_geometry import coverage_and_reach, icosphere
+    (``test_geometry.coverage_and_reach``); elsewhere the ray's end moves as
+    ``test_geometry.surface_tolerance`` derives for a rasterised surface: by the rounding
+    of the window position its position is interpolated at (``window_rounding`` px:
+    llvmpipe's float positions, or a GPU's sub-pixel grid), moving t by the ``spread`` over
+    ``REACH`` px scaled down to it, and of the box-relative position and the dot product,
+    8 u (t + |eye| + diagonal); that changes a pixel by at most ``end_rate`` per unit
+    length per layer."""
+    from test_geometry import REACH, coverage_and_reach, icosphere
+    from test_geometry_splat import window_rounding
     scene = scan_and_labels(40, blend)
     lo, hi = scene.bounds
     sphere = icosphere((lo + hi) / 2 + [0.0, -20.0, 0.0], 40.0, color=(0.9, 0.8, 0.2))
     scene = scene.replace(geometry=[sphere])
-    ambiguous, hit, _, t = coverage_and_reach(scene)
+    ambiguous, hit, spread, t = coverage_and_reach(scene)
     plan = raycast.make_plan(scene, step=1.5, ert_transmittance=0.0)
     ka, kd, ks, _ = scene.phong
     lit = 0.9 * (ka + kd) + ks
     rate = (1 + lit) * sum(end_rate(plan, layer, table) for layer, table in zip(plan.layers, plan.tables))
     diag = float(np.linalg.norm(np.asarray(hi) - np.asarray(lo)))
-    dt = 8 * U32 * (np.where(np.isfinite(t), t, 0) + float(np.linalg.norm(scene.camera.eye - lo)) + diag)
+    dt = (spread * window_rounding(renderer, scene) / REACH
+          + 8 * U32 * (np.where(np.isfinite(t), t, 0) + float(np.linalg.norm(scene.camera.eye - lo)) + diag))
     gl, ref, worst, _ = compare(renderer, scene, excluded=ambiguous, extra=rate * dt, step=1.5)
     assert hit.sum() > 100 and ambiguous.sum() < 0.2 * hit.sum()
     assert worst <= 1, worst

@@ -941,7 +941,7 @@ def test_mesh_orbit_sort_and_modes(mesh_viewer):
     v.refine()
     after = v.render_image()
     assert after[..., 3].max() > 0.5 and np.abs(after - before).max() > 0.05
-    # c: tetra's cell order, mpvo <-> centroid, passed as its sort option
+    # c: tetra's cell order, mpvo -> centroid -> walk -> mpvo, passed as its sort option
     assert v.render_arguments()[3].get("sort", "mpvo") == "mpvo" and "(mpvo)" in v.title
     press(v, "c")
     assert v.render_arguments()[3] == {"sort": "centroid"} and v.messages[-1] == "sort centroid"
@@ -950,6 +950,10 @@ def test_mesh_orbit_sort_and_modes(mesh_viewer):
     centroid = v.render_image()
     assert centroid[..., 3].max() > 0.5
     assert np.abs(centroid - after).mean() < 0.01      # another order of the same cells
+    press(v, "c")                                      # the cell walk: no order, the same exact segments
+    assert v.render_arguments()[3] == {"sort": "walk"} and v.messages[-1] == "sort walk"
+    v.refine()
+    assert "(walk)" in v.title and np.abs(v.render_image() - after).max() < 1e-4
     press(v, "c")
     assert v.render_arguments()[3] == {"sort": "mpvo"}
     v.refine()

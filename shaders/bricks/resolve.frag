@@ -1,6 +1,7 @@
 // Bricked ray casting, modes mip, minip and average: classify the state the brick passes
 // left (raycast.frag under BRICKED) as the single pass classifies its own at the end.
 #version 330 core
+#include "common/precise.glsl"
 
 #ifndef MODE_AVERAGE
 #define MODE_AVERAGE 0
@@ -16,7 +17,8 @@ void main() {
     f_color = vec4(0.0);
 #if MODE_AVERAGE
     if (state.g > 0.0) {
-        vec4 rgba = applyTF(state.r / state.g);
+        PRECISE float mean = state.r / state.g;
+        vec4 rgba = applyTF(mean);
         f_color = vec4(rgba.rgb * rgba.a, rgba.a);
     }
 #else

@@ -3,6 +3,9 @@
 #define DVR_CLASSIFICATION_GLSL
 
 #include "common/compositing.glsl"
+#ifndef PRECISE
+#define PRECISE   // common/precise.glsl, where a shader includes it first
+#endif
 
 uniform sampler2D t_tf;     // (n, 2) RGBA32F: row 0 colour and unit-distance opacity,
                             // row 1 transparency 1 - opacity (precise near opacity 1)
@@ -13,12 +16,14 @@ uniform int u_tf_size;
 // Linear interpolation between table entries done here, in full float precision,
 // rather than by the texture unit's filter.
 vec4 lerpTableRow(sampler2D table, float s, int row) {
-    float u = clamp((s - u_tf_lo) * u_tf_scale, 0.0, float(u_tf_size - 1));
+    // (precise: the same value classified alike in every shader, bricks/resolve.frag too)
+    PRECISE float u = clamp((s - u_tf_lo) * u_tf_scale, 0.0, float(u_tf_size - 1));
     int i0 = min(int(floor(u)), u_tf_size - 2);
     float f = u - float(i0);
     vec4 a = texelFetch(table, ivec2(i0, row), 0);
     vec4 b = texelFetch(table, ivec2(i0 + 1, row), 0);
-    return a * (1.0 - f) + b * f;
+    PRECISE vec4 value = a * (1.0 - f) + b * f;
+    return value;
 }
 
 vec4 lookupTFRow(float s, int row) {

@@ -1,6 +1,9 @@
 // Opacity correction and front-to-back compositing (NumPy twins: reference.common).
 #ifndef DVR_COMPOSITING_GLSL
 #define DVR_COMPOSITING_GLSL
+#ifndef PRECISE
+#define PRECISE   // common/precise.glsl, where a shader includes it first
+#endif
 
 // log(1 + x) and exp(x) - 1 keeping relative precision for small x. GLSL has neither,
 // and its log/exp are only absolutely accurate near 1 (llvmpipe's are), so the
@@ -62,7 +65,8 @@ void compositeFrontToBack(inout vec3 color, inout float alpha_acc, vec3 rgb, flo
 // The over operator on premultiplied colours: `front` seen in front of `back` (the
 // blending the slicing techniques ask of GL, done in the shader).
 vec4 over(vec4 front, vec4 back) {
-    return front + (1.0 - front.a) * back;
+    PRECISE vec4 seen = front + (1.0 - front.a) * back;   // (fused alike in every pass)
+    return seen;
 }
 
 // A ray's gathered colour and opacity with a premultiplied piece (a segment's colour

@@ -6,6 +6,9 @@
 #ifndef MASK_NONFINITE
 #define MASK_NONFINITE 0
 #endif
+#ifndef PRECISE
+#define PRECISE   // common/precise.glsl, where a shader includes it first
+#endif
 #ifndef TEXTURE_FILTER_EXACT
 #define TEXTURE_FILTER_EXACT 0   // 1: the texture unit's linear filter has float weights (set
                                  // per context by the program cache); 0: interpolate fetches
@@ -46,11 +49,13 @@ vec4 fetchTrilinear(sampler3D t, vec3 x) {
     vec3 f = xc - lo;
     ivec3 a = ivec3(lo);
     ivec3 b = min(a + 1, last);
-    vec4 x00 = mix(texelFetch(t, a, 0), texelFetch(t, ivec3(b.x, a.y, a.z), 0), f.x);
-    vec4 x10 = mix(texelFetch(t, ivec3(a.x, b.y, a.z), 0), texelFetch(t, ivec3(b.x, b.y, a.z), 0), f.x);
-    vec4 x01 = mix(texelFetch(t, ivec3(a.x, a.y, b.z), 0), texelFetch(t, ivec3(b.x, a.y, b.z), 0), f.x);
-    vec4 x11 = mix(texelFetch(t, ivec3(a.x, b.y, b.z), 0), texelFetch(t, b, 0), f.x);
-    return mix(mix(x00, x10, f.y), mix(x01, x11, f.y), f.z);
+    // (precise: the same weights and values give the same number in every shader)
+    PRECISE vec4 x00 = mix(texelFetch(t, a, 0), texelFetch(t, ivec3(b.x, a.y, a.z), 0), f.x);
+    PRECISE vec4 x10 = mix(texelFetch(t, ivec3(a.x, b.y, a.z), 0), texelFetch(t, ivec3(b.x, b.y, a.z), 0), f.x);
+    PRECISE vec4 x01 = mix(texelFetch(t, ivec3(a.x, a.y, b.z), 0), texelFetch(t, ivec3(b.x, a.y, b.z), 0), f.x);
+    PRECISE vec4 x11 = mix(texelFetch(t, ivec3(a.x, b.y, b.z), 0), texelFetch(t, b, 0), f.x);
+    PRECISE vec4 value = mix(mix(x00, x10, f.y), mix(x01, x11, f.y), f.z);
+    return value;
 }
 
 // The same in a layer of a 2D array texture (2D slicing's stacks), x in texel units.
@@ -74,11 +79,26 @@ uniform vec3 u_brick_origin;  // the brick texture's first sample (whole numbers
 uniform vec3 u_brick_texels;  // its samples per axis
 #endif
 
+// The volume's texel coordinate of a world point and a brick's (a whole number less,
+// exactly), both precise (common/precise.glsl): a GPU compiler left to itself fuses the
+// brick's p / spacing - origin into one FMA, which rounds p / spacing's product once
+// instead of twice and moves the brick's coordinate off the volume's by its rounding.
+vec3 volumeTexel(vec3 p_world) {
+    PRECISE vec3 x = p_world / u_spacing;
+    return x;
+}
+#if BRICKED
+vec3 brickTexel(vec3 p_world) {
+    PRECISE vec3 x_volume = p_world / u_spacing;
+    PRECISE vec3 x = x_volume - u_brick_origin;
+    return x;
+}
+#endif
+
 // A 3D texture whose texel centres are the samples, at a world point.
 vec4 filteredAt(sampler3D t, vec3 p_world) {
 #if BRICKED
-    // the brick's texel coordinate: a whole number less than the volume's, exactly
-    vec3 x = p_world / u_spacing - u_brick_origin;
+    vec3 x = brickTexel(p_world);
   #if TEXTURE_FILTER_EXACT
     return texture(t, (x + 0.5) / u_brick_texels);
   #else
@@ -87,7 +107,7 @@ vec4 filteredAt(sampler3D t, vec3 p_world) {
 #elif TEXTURE_FILTER_EXACT
     return texture(t, worldToTex(p_world));
 #else
-    return fetchTrilinear(t, p_world / u_spacing);
+    return fetchTrilinear(t, volumeTexel(p_world));
 #endif
 }
 
@@ -96,18 +116,19 @@ vec4 filteredAt(sampler3D t, vec3 p_world) {
 // converted) values, so the same numbers as a float texture read by fetches
 float sampleVolume(vec3 p_world) {
     ivec3 last = textureSize(t_volume, 0) - 1;
-    vec3 xc = clamp(p_world / u_spacing - u_brick_origin, vec3(0.0), vec3(last));
+    vec3 xc = clamp(brickTexel(p_world), vec3(0.0), vec3(last));
     vec3 lo = floor(xc);
     vec3 f = xc - lo;
     ivec3 a = ivec3(lo);
     ivec3 b = min(a + 1, last);
 #define BRICK_TEXEL(i, j, k) vec4(texelFetch(t_volume, ivec3(i, j, k), 0))
-    vec4 x00 = mix(BRICK_TEXEL(a.x, a.y, a.z), BRICK_TEXEL(b.x, a.y, a.z), f.x);
-    vec4 x10 = mix(BRICK_TEXEL(a.x, b.y, a.z), BRICK_TEXEL(b.x, b.y, a.z), f.x);
-    vec4 x01 = mix(BRICK_TEXEL(a.x, a.y, b.z), BRICK_TEXEL(b.x, a.y, b.z), f.x);
-    vec4 x11 = mix(BRICK_TEXEL(a.x, b.y, b.z), BRICK_TEXEL(b.x, b.y, b.z), f.x);
+    PRECISE vec4 x00 = mix(BRICK_TEXEL(a.x, a.y, a.z), BRICK_TEXEL(b.x, a.y, a.z), f.x);
+    PRECISE vec4 x10 = mix(BRICK_TEXEL(a.x, b.y, a.z), BRICK_TEXEL(b.x, b.y, a.z), f.x);
+    PRECISE vec4 x01 = mix(BRICK_TEXEL(a.x, a.y, b.z), BRICK_TEXEL(b.x, a.y, b.z), f.x);
+    PRECISE vec4 x11 = mix(BRICK_TEXEL(a.x, b.y, b.z), BRICK_TEXEL(b.x, b.y, b.z), f.x);
 #undef BRICK_TEXEL
-    return mix(mix(x00, x10, f.y), mix(x01, x11, f.y), f.z).r;
+    PRECISE vec4 value = mix(mix(x00, x10, f.y), mix(x01, x11, f.y), f.z);
+    return value.r;
 }
 #elif BRICK_NORMALIZED
 // bricks of 8- or 16-bit integers as 16-bit normalised texels of the sample less the

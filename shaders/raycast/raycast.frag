@@ -1,6 +1,9 @@
 // Single-pass ray casting: one ray per pixel centre, ray-box entry and exit, midpoint
 // samples on segments `u_step` long with the last (shorter) segment at its true length.
 #version 330 core
+// precise (common/precise.glsl) on the ray's positions, the texel coordinates and the
+// sums: the bricked passes (BRICKED) must evaluate them exactly as the single pass does
+#include "common/precise.glsl"
 
 // Feature switches, off by default; the renderer defines exactly those a scene uses.
 #ifndef MODE_COMPOSITE
@@ -166,7 +169,9 @@ int skipEmptyBrick(vec3 p, vec3 origin, vec3 dir, float t0, float jitter, int k)
 #if STEP_TABLE
 // Full segment k's midpoint: from k, never accumulated, so a skip cannot move a sample.
 vec3 segmentMidpoint(vec3 origin, vec3 dir, float t0, float jitter, int k) {
-    return origin + (t0 + (jitter + float(k) + 0.5) * u_step) * dir;
+    PRECISE float t = t0 + (jitter + float(k) + 0.5) * u_step;
+    PRECISE vec3 p = origin + t * dir;
+    return p;
 }
 
 // A full segment's corrected, premultiplied piece from the step table (0 in a masked cell).
@@ -194,7 +199,7 @@ void compositeUntilEnd(inout vec3 color, inout float alpha_acc, vec4 piece, inou
 void compositePartial(vec3 origin, vec3 dir, float a, float b, inout vec3 color, inout float alpha_acc) {
     float len = b - a;
     if (len <= 0.0) return;
-    vec3 p = origin + 0.5 * (a + b) * dir;
+    PRECISE vec3 p = origin + 0.5 * (a + b) * dir;
     if (!OWNED(p)) return;
   #if MASK_NONFINITE
     if (!insideValidCell(p)) return;
@@ -209,7 +214,7 @@ void compositePartial(vec3 origin, vec3 dir, float a, float b, inout vec3 color,
 void main() {
     vec3 origin, dir;
     pixelRay(origin, dir);
-    vec2 range = clipRange(origin, dir, intersectBox(origin, dir, vec3(0.0), u_extent));
+    PRECISE vec2 range = clipRange(origin, dir, intersectBox(origin, dir, vec3(0.0), u_extent));
 #if BRICKED
     f_color = accumulatedSoFar();   // the bricks in front: this pass continues their sums
 #else
@@ -237,8 +242,8 @@ void main() {
 #endif
 
 #if MODE_COMPOSITE
-    vec3 color = f_color.rgb;
-    float alpha_acc = f_color.a;
+    PRECISE vec3 color = f_color.rgb;
+    PRECISE float alpha_acc = f_color.a;
   #if SABELLA
     float s_peak = -1.0 / 0.0;  // the ray's largest sample and where it is first met
     float t_peak = 0.0;
@@ -248,12 +253,15 @@ void main() {
     bool have_front = true;
   #endif
 #elif MODE_MIP
-    float s_best = -1.0 / 0.0;
+    // (precise: the single pass classifies its extreme here, the bricked ones in
+    // bricks/resolve.frag; an NVIDIA GPU's compiler, left to itself, classified the same
+    // extreme a few ulps differently here in 1.6 % of a mip image's pixels)
+    PRECISE float s_best = -1.0 / 0.0;
 #elif MODE_MINIP
-    float s_best = 1.0 / 0.0;
+    PRECISE float s_best = 1.0 / 0.0;
 #elif MODE_AVERAGE
-    float s_sum = 0.0;
-    float len_sum = 0.0;
+    PRECISE float s_sum = 0.0;
+    PRECISE float len_sum = 0.0;
 #elif MODE_ISOSURFACE
     float t_prev = t0;
     bool have_prev = false;
@@ -284,11 +292,13 @@ void main() {
     // corrected for their own length once per ray, outside the loop: llvmpipe runs both
     // sides of a branch that differs between pixels, so a per-sample choice would cost
     // both ways for every sample.
-    int n_full = max(int(floor((t1 - t0) / u_step - jitter)), 0);
+    PRECISE float steps = (t1 - t0) / u_step - jitter;
+    int n_full = max(int(floor(steps)), 0);
 #if JITTER
     // (unjittered rays have no front partial: llvmpipe would run its body regardless, 8 %
     // of a Marschner-Lobb frame at the tolerance's step for VTK's one-voxel error)
-    compositePartial(origin, dir, t0, min(t0 + jitter * u_step, t1), color, alpha_acc);
+    PRECISE float t_front = min(t0 + jitter * u_step, t1);
+    compositePartial(origin, dir, t0, t_front, color, alpha_acc);
 #endif
     bool ended = false;
     int k_first = 0;
@@ -338,7 +348,8 @@ void main() {
         if (ended) break;
     }
     if (!ended) {
-        compositePartial(origin, dir, max(t0 + (jitter + float(n_full)) * u_step, t0), t1, color, alpha_acc);
+        PRECISE float t_last = max(t0 + (jitter + float(n_full)) * u_step, t0);
+        compositePartial(origin, dir, t_last, t1, color, alpha_acc);
     }
 #else
     // Segment k spans [t0 + (jitter + k) * step, t0 + (jitter + k + 1) * step] clipped to
@@ -470,13 +481,13 @@ void main() {
     s_front = sampleVolume(origin + max(t0 + (jitter + float(k_first)) * u_step, t0) * dir);
   #endif
     for (int k = k_first; k <= k_last && k < u_max_segments; ++k) {
-        float a = max(t0 + (jitter + float(k)) * u_step, t0);
+        PRECISE float a = max(t0 + (jitter + float(k)) * u_step, t0);
         if (a >= t1) break;
-        float b = min(t0 + (jitter + float(k + 1)) * u_step, t1);
-        float len = b - a;
+        PRECISE float b = min(t0 + (jitter + float(k + 1)) * u_step, t1);
+        PRECISE float len = b - a;
         if (len <= 0.0) continue;
-        float tm = 0.5 * (a + b);
-        vec3 p = origin + tm * dir;
+        PRECISE float tm = 0.5 * (a + b);
+        PRECISE vec3 p = origin + tm * dir;
         if (!OWNED(p)) continue;
 #if MASK_NONFINITE
         if (!insideValidCell(p)) {

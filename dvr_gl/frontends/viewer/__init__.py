@@ -30,7 +30,7 @@ Volume. Only techniques whose ``make_plan`` accepts a mesh scene are offered (to
 (``raycast``, the default) is replaced by the first one that renders this data, and the
 viewer says so. Whatever assumes a grid has a mesh path: tetra takes no step (the ``-`` /
 ``=`` keys say so, coarse frames while dragging lower only the resolution), key ``c``
-switches its cell order (``sort``: ``mpvo`` / ``centroid``), the editor's histogram counts
+switches its cell order (``sort``: ``mpvo`` / ``centroid`` / ``walk``), the editor's histogram counts
 ``mesh.scalars``, the title shows points and tets instead of the grid's shape, modes tetra
 cannot render are skipped with the usual message, and a double click picks along the ray
 through the cells themselves (:func:`pick_point_mesh`: the ray is intersected with every

@@ -114,7 +114,8 @@ def switch_option(v, option):
 
 def next_sort(v):
     """Key c: the next cell order of a technique with a ``sort`` option (tetra:
-    "mpvo", exact per pixel, and "centroid", cheaper)."""
+    "mpvo", exact per pixel; "centroid", cheaper; "walk", each ray walked from cell to
+    cell on the GPU, exact with no order at all)."""
     if not v.info.accepts("sort") or v.info.params is None:
         v.say(f"{v.technique} has no sort option (tetra's cell order, for meshes)")
         return False

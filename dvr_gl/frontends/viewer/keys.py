@@ -40,7 +40,7 @@ dvr-gl view: keys and mouse
   x                    optical model: emission-absorption, absorption only, emission only, Sabella
   i                    illustration: none, boundary, silhouette, tone, depth cue, all four
   p                    pre-integration on / off (techniques that offer it)
-  c                    cell order mpvo / centroid (tetra, for meshes)
+  c                    cell order mpvo / centroid / walk (tetra, for meshes)
   k / K                clip plane through the centre facing you, on / off; turn it to face you
   g                    show / hide the surfaces given with --geometry
   F2 F3 F4 F5          show / hide volume 1..4: INPUT (or its first channel), then each
