@@ -7,7 +7,11 @@ pieces in the same order with the same arithmetic. The one difference is the tex
 coordinate. Interpolated from texel fetches in the shader (``TEXTURE_FILTER_EXACT`` 0, as
 on GPUs; integer data is always bricked that way), a brick's texel coordinate is the
 whole texture's less a whole number, exact in float32, so floor, fraction and the values
-fetched are the same: the images are equal bit for bit. Through the texture unit (float
+fetched are the same: the images are equal bit for bit. That needs the shaders' arithmetic
+evaluated as written in both: a GPU compiler fuses ``p / spacing - o`` into one FMA (and
+the rest as it pleases) unless told not to, so the ray's positions, the texel coordinates,
+the sums and the extreme are ``precise`` (shaders/common/precise.glsl; measured on an
+NVIDIA GPU: bit for bit with it, up to 3e-6 apart without). Through the texture unit (float
 data on llvmpipe), the normalised coordinate ``(x - o + 0.5) / m`` rounds differently from
 ``(x + 0.5) / n``; with the fetched images equal, the triangle inequality bounds each
 pixel's difference by the two paths' own differences from their fetched images: the

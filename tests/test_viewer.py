@@ -1102,6 +1102,8 @@ def test_tolerance_refines_to_the_chosen_step_and_keys_change_it(open_viewer, re
     with the viewer's own renderer's: where two ways of sampling are a close call, the
     timing that settles it can fall either way in two renderers."""
     v = head_viewer(open_viewer, "--tolerance", "2e-3", "--screenshot", str(tmp_path / "tol.png"))
+    v.frame()                        # the first frame comes at once, before any pilot
+    assert v.last_frame.quality == "coarse" and getattr(v.renderer, "last_choice", None) is None
     v.refine()
     assert v.last_frame.quality == "full"
     scene, name, step, options = v.render_arguments()

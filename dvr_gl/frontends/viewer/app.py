@@ -210,10 +210,11 @@ class Viewer:
         info = self.techniques[name or self.technique]
         return {k: v for k, v in self.options.items() if info.accepts(k)}
 
-    def render_arguments(self, width=None, height=None, coarse=False):
+    def render_arguments(self, width=None, height=None, coarse=False, tolerance=True):
         """``(scene, technique, step, options)`` for ``Renderer.render`` /
         ``render_target``: what the next frame renders (at the framebuffer size unless
-        given). Tests render the same arguments headless to compare."""
+        given). Tests render the same arguments headless to compare. ``tolerance=False``
+        leaves the tolerance's choice out (no pilot: for checks of the state alone)."""
         fw, fh = self.framebuffer_size
         width, height = width or fw, height or fh
         step = self.effective_step()
@@ -223,12 +224,12 @@ class Viewer:
         if self.accumulates():
             options["repetitions"] = 1 if coarse else self.accumulated
         scene = self._scene(width, height)
-        if self.tolerance is not None and self.technique == "raycast" and not coarse:
+        if tolerance and self.tolerance is not None and self.technique == "raycast" and not coarse:
             # progressive: coarse frames while the view moves, then the step (and
             # way of sampling) the error model picks for the tolerance, once it is still
             step, sampling = self.renderer.tolerance_settings(scene, self.tolerance, "raycast", **options)
             options.update(sampling)
-        if self.tolerance is not None and self.technique == "tetra" and coarse:
+        if tolerance and self.tolerance is not None and self.technique == "tetra" and coarse:
             # a mesh turns at the fastest way within the tolerance (rendering.mesh_tolerance,
             # picked once per view family); still frames are tetra's own
             return self.renderer.mesh_tolerance_settings(scene, self.tolerance, "tetra")
@@ -243,7 +244,7 @@ class Viewer:
         """Raise if the current state cannot be rendered (make_plan on a tiny scene)."""
         from ...techniques import get_technique
 
-        scene, name, step, options = self.render_arguments(8, 8)
+        scene, name, step, options = self.render_arguments(8, 8, tolerance=False)
         get_technique(name).make_plan(scene, step, tables=self.renderer.tables, **options)
 
     def state(self):
@@ -405,7 +406,11 @@ class Viewer:
 
     # -- frames ------------------------------------------------------------------------
     def quality(self):
-        """"coarse" while input keeps arriving, "full" once it has settled."""
+        """"coarse" while input keeps arriving, "full" once it has settled. With a
+        tolerance the first frame is coarse too: a picture at once, before the full frame
+        waits for the error model's pilot."""
+        if self.last_frame is None and self.tolerance is not None:
+            return "coarse"
         return "coarse" if self.clock() - self._last_input < self.settle_s else "full"
 
     def needs_frame(self):
