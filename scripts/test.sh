@@ -19,14 +19,24 @@ if [ ${#missing[@]} -gt 0 ]; then
     DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq "${missing[@]}" >/dev/null
 fi
 
-# llvmpipe uses every core unless told otherwise; say what the run used
-export LP_NUM_THREADS="${LP_NUM_THREADS:-$(nproc)}"
-echo "LP_NUM_THREADS=$LP_NUM_THREADS"
+# One pytest worker per core (pytest-xdist, in the dev extra), each with a one-thread
+# llvmpipe: much of the suite is single-threaded NumPy (the references, the exact
+# images), which then runs side by side. DVR_GL_TEST_WORKERS=1 runs it in one process,
+# with llvmpipe on every core unless LP_NUM_THREADS says otherwise.
+workers="${DVR_GL_TEST_WORKERS:-$(nproc)}"
+parallel=()
+if [ "$workers" -gt 1 ] && python -c "import xdist" 2>/dev/null; then
+    parallel=(-n "$workers")
+    export LP_NUM_THREADS="${LP_NUM_THREADS:-1}"
+else
+    export LP_NUM_THREADS="${LP_NUM_THREADS:-$(nproc)}"
+fi
+echo "pytest workers: ${parallel[1]:-1}, LP_NUM_THREADS=$LP_NUM_THREADS"
 
 log=$(mktemp)
 trap 'rm -f "$log"' EXIT
 set +e
-python -m pytest -q -p no:cacheprovider "$@" 2>&1 | tee "$log"
+python -m pytest -q -p no:cacheprovider "${parallel[@]}" "$@" 2>&1 | tee "$log"
 status=${PIPESTATUS[0]}
 set -e
 if [ "$status" -ne 0 ]; then

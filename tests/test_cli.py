@@ -579,8 +579,8 @@ def test_render_8bit_ct_window_errors_name_tf(tiny, capsys):
 
 def test_mesh_bench_quick_run(tmp_path, capsys):
     """`dvr-gl bench --suite mesh` end to end on the bundled Delaunay ball (64x64): rows for
-    both sorts and VTK, dvr_gl's error far below 1e-3 and below VTK's, the CPU
-    classification timed, results written."""
+    the sorts, dvr_gl at VTK's error and VTK, dvr_gl's error far below 1e-3 and below VTK's,
+    the tolerance row within VTK's RMSE, the CPU classification timed, results written."""
     pytest.importorskip("vtk")
     from dvr_gl.bench import cli as bench
     parser = argparse.ArgumentParser()
@@ -590,12 +590,18 @@ def test_mesh_bench_quick_run(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "Shirley-Tuchman classification on the CPU" in out and "ball" in out
     rows = {r["renderer"]: r for r in csv.DictReader(open(tmp_path / "m.csv"))}
-    assert set(rows) == {"dvr_gl tetra mpvo", "dvr_gl tetra centroid", "dvr_gl tetra walk", "VTK projected tetrahedra"}
+    assert set(rows) == {"dvr_gl tetra mpvo", "dvr_gl tetra centroid", "dvr_gl tetra walk", "dvr_gl at VTK's error",
+                         "VTK projected tetrahedra"}
     assert float(rows["dvr_gl tetra mpvo"]["rmse"]) < 1e-4
     assert float(rows["dvr_gl tetra mpvo"]["rmse"]) < float(rows["VTK projected tetrahedra"]["rmse"])
     assert float(rows["dvr_gl tetra mpvo"]["ms_median"]) > 0
+    # the tolerance row asks for VTK's RMSE and reaches it with the way its pilot chose
+    at_vtk = rows["dvr_gl at VTK's error"]
+    assert float(at_vtk["tolerance"]) == pytest.approx(float(rows["VTK projected tetrahedra"]["rmse"]))
+    assert float(at_vtk["rmse"]) <= float(at_vtk["tolerance"]) and at_vtk["chosen"] in out
+    assert float(at_vtk["pilot_ms"]) > 0 and float(at_vtk["ms_median"]) > 0
     doc = json.load(open(tmp_path / "m.json"))
-    assert doc["info"]["cpu_classify_ms"]["ball"] > 0 and len(doc["rows"]) == 4
+    assert doc["info"]["cpu_classify_ms"]["ball"] > 0 and len(doc["rows"]) == 5
     assert (tmp_path / "m.png").stat().st_size > 0
 
 

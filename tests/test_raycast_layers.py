@@ -373,3 +373,67 @@ def test_masked_samples_in_a_layer_are_a_named_error(renderer):
 def test_other_techniques_refuse_layers_by_name(renderer, technique):
     with pytest.raises(ValueError, match="a scene with layers .* is rendered by raycast"):
         renderer.render(channels_scene(8), technique)
+
+
+def blocks_scene(size, blend):
+    """Dense blocks that start one sample past a brick face (samples 10 to 22 of 33, bricks
+    of 8 cells; the brick before is empty with its margin): a ray that skipped a segment
+    too many past an empty brick, or started too late, would lose their front."""
+    values = np.zeros((33, 33, 33), np.float32)
+    values[10:23, 10:23, 10:23] = 1.0
+    labels = np.zeros((25, 25, 25), np.uint8)
+    labels[10:17, 10:17, 10:17] = 1
+    tf = dvr_gl.TransferFunction(color=[(0.0, 1.0, 0.8, 0.2), (1.0, 1.0, 0.8, 0.2)],
+                                 opacity=[(0.0, 0.0), (1.0, 0.6)], unit_distance=1.0)
+    layers = [Layer(dvr_gl.Volume(values), tf),
+              Layer(dvr_gl.Volume(labels, spacing=(1.5, 1.5, 1.5)), LabelColors({1: (0.1, 0.4, 1.0, 0.6)}),
+                    placed((1, 2, 0.5), 30, (-6.0, 4.0, 2.0)))]
+    camera = dvr_gl.default_camera(Extent(union_bounds(layers)), azimuth=25, elevation=15)
+    return dvr_gl.Scene.from_layers(layers, camera=camera, width=size, height=size, blend=blend)
+
+
+def skip_scenes():
+    """The scenes above, dense blocks at brick faces, and the head and field seen
+    orthographically and from inside."""
+    scene = head_and_field(32, "mix")
+    lo, hi = (np.asarray(b) for b in scene.bounds)
+    centre = (lo + hi) / 2
+    return [blocks_scene(48, "mix"), blocks_scene(48, "add"), head_and_field(40, "mix"), head_and_field(40, "add"),
+            channels_scene(40, "add"),
+            channels_scene(40, "mix"), scan_and_labels(40, "mix"), scan_and_labels(40, "add"),
+            scan_and_labels(32, "mix", colors=LabelColors({2: (0.2, 0.6, 1.0, 1.0)}, unit_distance=1.5)),
+            scene.replace(camera=dvr_gl.default_camera(Extent(scene.bounds), azimuth=-20, elevation=10, ortho=True)),
+            scene.replace(camera=dvr_gl.Camera(centre + [10.0, -5.0, 8.0], centre + [60.0, 20.0, 0.0], fov=70))]
+
+
+def test_empty_space_skipping_changes_no_bit(renderer):
+    """Skipping bricks empty in every layer holding the ray (composite) gives the image
+    rendered without it, bit for bit, at the default step and at one that puts midpoints
+    elsewhere; the head's bricks of air are empty, so the skip is taken."""
+    for scene in skip_scenes():
+        plan = raycast_layers.make_plan(scene)
+        if plan.occupancy is None:      # (the channels: every brick occupied, nothing to skip)
+            assert "SKIP_EMPTY" not in plan.defines
+        else:
+            assert plan.defines["SKIP_EMPTY"] == 1 and len(plan.occupancy) == len(scene.all_layers)
+        for step in (None, 1.3):
+            on = renderer.render(scene, step=step)
+            off = renderer.render(scene, step=step, skip_empty=False)
+            assert np.array_equal(on, off), (scene.blend, step)
+    assert not raycast_layers.make_plan(head_and_field(8)).occupancy[0].all()
+    assert "SKIP_EMPTY" not in raycast_layers.make_plan(channels_scene(8, mode="mip")).defines
+
+
+def test_label_bricks_are_empty_without_a_visible_label_nearby():
+    """A label brick is occupied when a label with opacity lies among its samples or one
+    beyond: a lone label at sample 8 (shared by bricks 0 and 1) or 9 (brick 0's margin)
+    marks both, at 10 only brick 1, and a label without opacity none."""
+    colors = LabelColors({2: (1.0, 1.0, 1.0, 0.5), 3: (1.0, 1.0, 1.0, 0.0)})
+    for index, occupied in ((4, [0]), (8, [0, 1]), (9, [0, 1]), (10, [1])):
+        labels = np.zeros((17, 17, 17), np.uint8)
+        labels[index, 4, 4] = 2
+        labels[4, 12, 12] = 3
+        bricks = raycast_layers.label_occupancy(dvr_gl.Volume(labels), colors)
+        expected = np.zeros((2, 2, 2), bool)
+        expected[occupied, 0, 0] = True
+        assert np.array_equal(bricks, expected), index

@@ -49,7 +49,7 @@ def add_arguments(parser):
                              "all.csv/.json/.md/.png and contact.png); peer: the ray caster beside VTK (default); slicing: slice2d (k = 0, 1, 3), "
                              "slice3d (cpu and vertex proxies) and the ray caster at equal sample "
                              "distance, each with and without pre-integration; mesh: projected "
-                             "tetrahedra (MPVO and centroid sort) beside VTK's on the NASA meshes "
+                             "tetrahedra (MPVO, centroid sort and the cell walk; tolerance= at VTK's error) beside VTK's on the NASA meshes "
                              "and the Delaunay ball (--datasets bluntfin,combustor,loxpost,ball); particles: "
                              "PBVR at several repetition counts beside raycast (head) and tetra (bluntfin); "
                              "shading: the cost of lighting in raycast and slice3d beside VTK's ShadeOn, "

@@ -10,9 +10,10 @@ Per data set and renderer:
 - frame time at ``--size`` (default 512) for a *new view each frame* (the camera turns by
   0.5 degree between frames, so both renderers sort again every frame, as a user turning
   the mesh sees it), median of ``--repeats`` frames after one warm-up; each frame ends
-  with the float image read back. dvr_gl's sorts take their frames in turn, view by view
-  (a change in the machine's load falls on all of them alike). dvr_gl's frame is split into its parts: the visibility
-  sort (CPU, ``sort ms``) and projection + draw + read-back (GPU, ``draw ms``);
+  with the float image read back. All renderers take their frames in turn, view by view
+  (a change in the machine's load falls on all of them alike). dvr_gl's frame is split
+  into its parts: the visibility sort (CPU, ``sort ms``) and projection + draw +
+  read-back (GPU, ``draw ms``);
 - RMSE, largest error and PSNR against ``reference.exact`` at ``--error-size`` (default
   128), with the same camera.
 
@@ -25,6 +26,13 @@ Renderers: dvr_gl ``tetra`` with ``sort="mpvo"``, with ``sort="centroid"`` and w
 is the plan's CPU time; ``passes`` its layers of depth peeling), and VTK's
 projected tetrahedra (its default cell-centre depth sort); VTK is left out when it is
 not installed. ``t/VTK`` and ``err/VTK`` divide by VTK's row of the same data set.
+
+With VTK, also "dvr_gl at VTK's error": ``Renderer.render(tolerance=E)`` with E VTK's
+RMSE on the data set (``dvr_gl.rendering.mesh_tolerance``: the fastest way the pilot
+measures within E). Its pilot runs once per data set before the timed frames (its
+seconds are reported apart, ``pilot ms``); the frames then cost the chosen way's frame
+(the choice is kept while the view turns). Its RMSE is that of the chosen way at
+``--error-size``.
 """
 
 from __future__ import annotations
@@ -41,20 +49,33 @@ from .common import error_axes, figure_bytes, fmt, load_mesh_dataset, machine_in
 
 CSV_FIELDS = ["dataset", "tets", "drawn", "renderer", "width", "sort_ms", "draw_ms", "ms_median", "ms_min",
               "error_size", "rmse", "max_abs", "psnr", "time_vs_vtk", "rmse_vs_vtk", "cycles_broken",
-              "gap_constraints", "walk_passes"]
+              "gap_constraints", "walk_passes", "tolerance", "chosen", "pilot_ms", "pilot_rmse"]
+TOLERANCE_ROW = "dvr_gl at VTK's error"
+
+
+def _render_choice(gl, scene, choice):
+    """``scene`` rendered the way ``choice`` (a mesh_tolerance.MeshChoice) names, whatever
+    the pilot would pick for this size."""
+    from ..rendering import mesh_tolerance as mt
+    way = mt.Way(choice.label, choice.technique, choice.options, choice.grid, choice.step_spacings)
+    s, technique, step, options = mt.way_arguments(scene, way, gl.tables)
+    return gl.render(s, technique=technique, step=step, **options)
 
 
 def _camera(mesh, turn=0.0):
     return default_camera(mesh, azimuth=30.0 + turn, elevation=20.0)
 
 
-def _time_dvr_gl_sorts(gl, scene, sorts, repeats, on_frame):
+def _time_interleaved(gl, scene, sorts, repeats, on_frame, tolerance=None, vtk=None):
     """Median (sort, draw + read-back) seconds and every frame's total, for frames each
-    from a new view, the sorts taking their frames in turn (each view drawn by every sort
-    before the camera turns on), so that a change in the machine's load falls on all of
-    them alike: {sort: (last plan, sort s, draw s, totals)}."""
+    from a new view, the renderers taking their frames in turn (each view drawn by every
+    sort, then at ``tolerance`` (an RMSE, if given: ``Renderer.render(tolerance=)``, whose
+    pilot has run before) and by VTK (``vtk``, the peer module, if given) before the
+    camera turns on), so that a change in the machine's load falls on all of them alike:
+    {sort: (last plan, sort s, draw s, totals)}, {"tolerance": totals, "vtk": totals}."""
     from ..techniques import tetra
     parts = {sort: ([], [], []) for sort in sorts}
+    others = {key: [] for key, on in (("tolerance", tolerance is not None), ("vtk", vtk is not None)) if on}
     plans = {}
     for i in range(-1, repeats):
         s = scene.replace(camera=_camera(scene.volume, 0.5 * (i + 1)))
@@ -69,8 +90,19 @@ def _time_dvr_gl_sorts(gl, scene, sorts, repeats, on_frame):
                 for part, value in zip(parts[sort], (t1 - t0, t2 - t1, t2 - t0)):
                     part.append(value)
             on_frame(sort)
-    return {sort: (plans[sort], statistics.median(p[0]), statistics.median(p[1]), p[2])
-            for sort, p in parts.items()}
+        if tolerance is not None:
+            t0 = time.perf_counter()
+            gl.render(s, technique="tetra", tolerance=tolerance)     # the choice is kept per view family
+            if i >= 0:
+                others["tolerance"].append(time.perf_counter() - t0)
+            on_frame("at VTK's error")
+        if vtk is not None:
+            _, (seconds,) = vtk.render_vtk_mesh(s, repeats=1, warmup=0)  # frame() and read-back, timed inside
+            if i >= 0:
+                others["vtk"].append(seconds)
+            on_frame("VTK")
+    return ({sort: (plans[sort], statistics.median(p[0]), statistics.median(p[1]), p[2])
+             for sort, p in parts.items()}, others)
 
 
 def _time_cpu_classification(scene, repeats=3):
@@ -114,10 +146,10 @@ def run_mesh(args, err=None):
             print(f"dvr-gl bench: {vtk_note}", file=err)
     renderers = [("dvr_gl tetra mpvo", "mpvo"), ("dvr_gl tetra centroid", "centroid"), ("dvr_gl tetra walk", "walk")]
     if peer is not None:
-        renderers.append(("VTK projected tetrahedra", "vtk"))
+        renderers += [(TOLERANCE_ROW, "tolerance"), ("VTK projected tetrahedra", "vtk")]
     frames = 1 + args.repeats
-    progress = Progress(len(names) * (3 + len(renderers) * (frames + 1)), stream=err)
-    rows, info = [], {"cpu_classify_ms": {}}
+    progress = Progress(len(names) * (4 + len(renderers) * (frames + 1)), stream=err)
+    rows, info = [], {"cpu_classify_ms": {}, "tolerance_first_call_ms": {}, "tolerance_measured": {}}
     try:
         with Renderer(backend=args.backend) as gl:
             info["dvr_gl"] = gl.info()
@@ -136,25 +168,38 @@ def run_mesh(args, err=None):
                 progress.advance(f"{name}: exact image")
                 info["cpu_classify_ms"][name] = 1e3 * _time_cpu_classification(scene)
                 progress.advance(f"{name}: CPU classification")
-                sorts = [sort for _, sort in renderers if sort != "vtk"]
-                timed = _time_dvr_gl_sorts(gl, scene, sorts, args.repeats,
-                                           lambda sort: progress.advance(f"{name}: dvr_gl tetra {sort}"))
+                sorts = [sort for _, sort in renderers if sort not in ("vtk", "tolerance")]
+                images, vtk_rmse, choice = {}, None, None
+                if peer is not None:
+                    images["vtk"], _ = peer.render_vtk_mesh(small, repeats=1, warmup=0)
+                    vtk_rmse = compare(images["vtk"], exact)["rmse"]
+                    t0 = time.perf_counter()
+                    gl.render(scene, technique="tetra", tolerance=vtk_rmse)   # the pilot, once per mesh
+                    choice = gl.last_choice
+                    info["tolerance_first_call_ms"][name] = 1e3 * (time.perf_counter() - t0)
+                    info["tolerance_measured"][name] = [
+                        dict(way=label, pilot_rmse=e, frame_ms=None if t is None else 1e3 * t)
+                        for label, e, t in choice.measured]
+                    images["tolerance"] = _render_choice(gl, small, choice)   # the frames' way, at the error size
+                    progress.advance(f"{name}: pilot at VTK's error")
+                timed, others = _time_interleaved(gl, scene, sorts, args.repeats,
+                                                  lambda label: progress.advance(f"{name}: {label}"),
+                                                  tolerance=vtk_rmse, vtk=peer)
                 for label, sort in renderers:
-                    tick = lambda: progress.advance(f"{name}: {label}")   # noqa: E731
-                    if sort == "vtk":
-                        image, times = peer.render_vtk_mesh(small, repeats=1, warmup=0)
-                        _, times = peer.render_vtk_mesh(scene, repeats=args.repeats, warmup=1,
-                                                        turn=lambda i: _camera(mesh, 0.5 * (i + 1)))
-                        for _ in range(frames):
-                            tick()
-                        row = dict(sort_ms=None, draw_ms=None, cycles_broken=None, gap_constraints=None,
-                                   drawn=None, walk_passes=None)
+                    row = dict(sort_ms=None, draw_ms=None, cycles_broken=None, gap_constraints=None,
+                               drawn=None, walk_passes=None, tolerance=None, chosen=None, pilot_ms=None,
+                               pilot_rmse=None)
+                    if sort in others:
+                        image, times = images[sort], others[sort]
+                        if sort == "tolerance":
+                            row.update(tolerance=vtk_rmse, chosen=choice.label, pilot_ms=1e3 * choice.pilot_seconds,
+                                       pilot_rmse=choice.pilot_rmse)
                     else:
                         last, ts, td, times = timed[sort]
                         image = gl.render(small, technique="tetra", sort=sort)
                         from ..techniques import tetra
                         plan = tetra.make_plan(scene, sort=sort, tables=gl.tables)
-                        row = dict(sort_ms=1e3 * ts, draw_ms=1e3 * td, cycles_broken=plan.order.cycles_broken,
+                        row.update(sort_ms=1e3 * ts, draw_ms=1e3 * td, cycles_broken=plan.order.cycles_broken,
                                    gap_constraints=plan.order.gap_constraints, drawn=int(plan.draw.size),
                                    walk_passes=last.walk_passes if sort == "walk" else None)
                     e = compare(image, exact)
@@ -179,10 +224,11 @@ def run_mesh(args, err=None):
 
 def format_mesh_table(rows):
     head = ("data", "tets", "renderer", "sort ms", "draw ms", "ms/frame", "RMSE", "max err", "t/VTK", "err/VTK",
-            "passes")
+            "passes", "way (pilot ms)")
     lines = [(r["dataset"], str(r["tets"]), r["renderer"], fmt(r["sort_ms"], ".0f"), fmt(r["draw_ms"], ".0f"),
               fmt(r["ms_median"], ".0f"), fmt(r["rmse"], ".2e"), fmt(r["max_abs"], ".3f"),
-              fmt(r["time_vs_vtk"], ".2f"), fmt(r["rmse_vs_vtk"], ".3f"), fmt(r.get("walk_passes"), "d"))
+              fmt(r["time_vs_vtk"], ".2f"), fmt(r["rmse_vs_vtk"], ".3f"), fmt(r.get("walk_passes"), "d"),
+              f"{r['chosen']} ({r['pilot_ms']:.0f})" if r.get("chosen") else "")
              for r in rows]
     widths = [max(len(h), *(len(l[i]) for l in lines)) if lines else len(h) for i, h in enumerate(head)]
 
@@ -200,7 +246,7 @@ def figure_png(rows, info) -> bytes:
     fig = Figure(figsize=(6.5, 4.5), constrained_layout=True)
     ax = fig.subplots()
     markers = {"dvr_gl tetra mpvo": ("tab:blue", "o"), "dvr_gl tetra centroid": ("tab:green", "s"),
-               "dvr_gl tetra walk": ("tab:purple", "D"),
+               "dvr_gl tetra walk": ("tab:purple", "D"), TOLERANCE_ROW: ("tab:orange", "*"),
                "VTK projected tetrahedra": ("tab:red", "^")}
     for label, (color, marker) in markers.items():
         pts = [(r["ms_median"], r["rmse"], r["dataset"]) for r in rows if r["renderer"] == label]
@@ -220,6 +266,15 @@ def run_mesh_bench(args) -> int:
           f"(a new view each frame, median of {info['repeats']}); error at {info['error_size']}x{info['error_size']} "
           "against reference.exact")
     print(format_mesh_table(rows))
+    for r in rows:
+        if r["renderer"] == TOLERANCE_ROW:
+            print(f"{r['dataset']}: tolerance={r['tolerance']:.3g} (VTK's RMSE) chose {r['chosen']} "
+                  f"(pilot RMSE {r['pilot_rmse']:.2e}); the pilot took {r['pilot_ms']:.0f} ms once "
+                  f"(first call at {info['size']}x{info['size']}, pilot and frame: "
+                  f"{info['tolerance_first_call_ms'][r['dataset']]:.0f} ms); pilot's ways, RMSE (ms at "
+                  f"up to 256 px): " + ", ".join(f"{m['way']} {m['pilot_rmse']:.1e}" + (
+                      f" ({m['frame_ms']:.0f})" if m["frame_ms"] is not None else "")
+                      for m in info["tolerance_measured"][r["dataset"]]))
     if info["cpu_classify_ms"]:
         print("Shirley-Tuchman classification on the CPU (NumPy; tetra clips per fragment instead), ms per view: "
               + ", ".join(f"{k} {v:.0f}" for k, v in info["cpu_classify_ms"].items()))

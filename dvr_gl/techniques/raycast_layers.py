@@ -49,9 +49,24 @@ target, ert_transmittance : as for one volume. Early ray termination ends a mixe
     once its transmittance is below the threshold, and stops compositing each added
     layer once its own is (the ray ends when all have): the dropped light is below the
     threshold per layer.
-skip_empty, step_table, gradients : speed choices of the one-volume ray caster that do not
-    change its image; accepted and without effect here (no brick skipping, every segment
-    corrects its own opacity, no lighting).
+skip_empty : empty-space skipping (composite mode), the image identical with it on and
+    off. Each layer is cut into bricks of ``BRICK`` cells, classified once per (volume,
+    TF or label table): a scan's brick is empty when its value range (its samples and one
+    more each side) has zero opacity (``bricks.brick_occupancy``), a label volume's when
+    no label with opacity lies among those samples (``label_occupancy``). A segment that
+    composited nothing looks up the brick of every layer holding its midpoint; where each
+    is empty (or, added, its layer has ended) every midpoint before the nearest of their
+    exits adds exactly nothing (the layers holding a point change only at stretch ends),
+    and the ray goes on at the segment before the first midpoint past it. Segments are
+    still counted from their stretch's start, so a jump moves no sample. Before the loop
+    each ray meets every layer's box around its occupied bricks (grown by a sample); a
+    stretch's segments whose midpoint lies before the first entry or after the last exit
+    (one more each side, for rounding) are passed over. A layer with fewer than
+    ``MIN_EMPTY_BRICKS`` of its bricks empty is treated as full (never looked up, no skip
+    where it holds the ray); where every layer is (or off) the shader has none of this.
+step_table, gradients : speed choices of the one-volume ray caster that do not change its
+    image; accepted and without effect here (a stretch's segments are shorter than the
+    step, each its own length, so every segment corrects its own opacity; no lighting).
 jitter_seed, preintegrate, refine : not rendered with layers: a named error.
 """
 
@@ -70,8 +85,12 @@ from ..model.transfer import LookupTable
 from ..util.cache import IdentityKey, TableCache
 from .common import (bind, box_proxy, draw_ray_proxy, camera_uniforms, check_flag, check_scene, check_step, check_target,
                      clip_defines, clip_uniforms, grow_pixels)
+from .bricks import brick_occupancy, partition, value_ranges
 from .geometry import surface_pass
 from .gpu import tf_texture, volume_texture
+
+BRICK = 8     # brick edge in cells for empty-space skipping (as the one-volume ray caster's)
+MIN_EMPTY_BRICKS = 0.2   # the share of empty bricks below which a layer is treated as full
 
 
 @dataclass
@@ -83,6 +102,7 @@ class LayersPlan:
     target: str = "rgba32f"
     ert_transmittance: float = 0.0
     defines: dict = field(default_factory=dict)
+    occupancy: tuple | None = None   # per layer (bz, by, bx) bool, or None when not skipping
 
     @property
     def layers(self):
@@ -165,8 +185,65 @@ def make_plan(scene, step=None, *, target="rgba32f", jitter_seed=None, ert_trans
         if layer.volume.has_nonfinite:
             raise ValueError("a scene with layers takes finite samples in every layer; masked (non-finite) "
                              "samples are rendered for one volume alone")
+    occupancy = None
+    if skip_empty and composite:
+        occupancy = tuple(layer_occupancy(layer, table, tables) for layer, table in zip(layers, classes))
+        # a layer with few empty bricks is taken as full: where it holds the ray nothing is
+        # skipped, and its bricks are never looked up (on llvmpipe the look-ups of one
+        # with 5 % empty cost more than its skips saved)
+        full = [occupied.mean() > 1 - MIN_EMPTY_BRICKS for occupied in occupancy]
+        if all(full):
+            occupancy = None        # nothing worth skipping: the look-ups would only cost
+        else:
+            defines["SKIP_EMPTY"] = 1
+            for i in np.flatnonzero(full):
+                defines[f"LAYER{i}_OCCUPIED"] = 1
     return LayersPlan(scene=scene, step=float(step), tables=classes, target=target, ert_transmittance=ert,
-                      defines=defines)
+                      defines=defines, occupancy=occupancy)
+
+
+def brick_ranges(values):
+    """Per brick of BRICK cells (bz, by, bx): (lo, hi) float64 of the samples its cells
+    touch and one more on every side (``bricks.value_ranges``)."""
+    bricks = partition(values.shape, BRICK, 0)
+    lo, hi = value_ranges(SimpleNamespace(data=values, shape=values.shape), bricks)
+    shape = tuple(b + 1 for b in bricks[-1].index)
+    return lo.reshape(shape), hi.reshape(shape)
+
+
+def label_occupancy(volume, colors):
+    """Per brick: whether a label with non-zero opacity lies among the samples its cells
+    touch or one beyond. A label is read at the rounded index of the sample's float32
+    value; both roundings of a value near a half count."""
+    v = volume.values(np.float32).astype(np.float64)
+    visible = np.append(colors.table[:, 3] > 0, False)       # the last entry: every label beyond the table
+    seen = np.zeros(v.shape, np.uint8)
+    for shift in (-1e-6, 1e-6):
+        index = np.floor(v + 0.5 + shift * (1.0 + np.abs(v)))
+        index = np.where((index < 0) | (index >= len(colors.table)), len(colors.table), index).astype(np.int64)
+        seen |= visible[index]
+    return brick_ranges(seen)[1] > 0
+
+
+def layer_occupancy(layer, table, tables):
+    """Per brick of the layer: whether anything in it can have opacity (a scan:
+    ``bricks.brick_occupancy`` of its value range; labels: ``label_occupancy``), made once
+    per volume and (volume, TF or label table)."""
+    if layer.is_labels:
+        return tables.get("layer_label_occupancy", layer.volume, table, make=label_occupancy)
+    ranges = tables.get("layer_brick_ranges", layer.volume, make=lambda volume: brick_ranges(volume.values(np.float32)))
+    return tables.get("layer_occupancy", layer.volume, layer.tf,
+                      make=lambda volume, tf: brick_occupancy(ranges, table))
+
+
+def occupancy_texture(renderer, layer, table, occupied):
+    """A layer's brick occupancy as a nearest-filtered 3-D texture, 255 where occupied."""
+    store = renderer.resources
+
+    def make():
+        mask = occupied.astype(np.uint8) * 255
+        return store.made("layer_occupancy", mask.shape, texture3d(renderer.ctx, mask, 1, "f1", linear=False))
+    return store.get("layer_occupancy", IdentityKey(layer.volume, table), make, capacity=MAX_LAYERS)
 
 
 def label_rows(colors):
@@ -230,6 +307,23 @@ def layer_uniforms(plan):
             "u_layer_inv_unit": f32(inv_unit)}
 
 
+def occupied_boxes(plan, brick):
+    """``u_occupied_lo``, ``u_occupied_hi``: per layer the box around its occupied bricks
+    in its own frame, grown by one sample spacing (so that rounding of a sample's position
+    cannot leave it); a point box far behind every ray where the layer has none."""
+    lo, hi = [], []
+    for layer, occupied in zip(plan.layers, plan.occupancy):
+        spacing = np.asarray(layer.volume.spacing, np.float64)
+        index = np.argwhere(occupied)[:, ::-1]          # brick x, y, z
+        if len(index) == 0:
+            lo.append((-1e30,) * 3)
+            hi.append((-1e30,) * 3)
+            continue
+        lo.append(index.min(axis=0) * brick * spacing - spacing)
+        hi.append((index.max(axis=0) + 1) * brick * spacing + spacing)
+    return {"u_occupied_lo": np.array(lo, np.float32).tobytes(), "u_occupied_hi": np.array(hi, np.float32).tobytes()}
+
+
 def union_proxy(scene, grow):
     """``box_proxy`` for the box around every layer (its corners relative to that box's
     own lower corner; the fragment shader rebuilds its ray, so only coverage matters)."""
@@ -249,12 +343,18 @@ def draw(renderer, plan):
     for i, (vol_tex, class_tex) in enumerate(_layer_textures(renderer, plan)):
         textures[f"t_layer{i}"] = vol_tex
         textures[f"t_class{i}"] = class_tex
+    if plan.occupancy is not None:
+        for i, (layer, table, occupied) in enumerate(zip(plan.layers, plan.tables, plan.occupancy)):
+            textures[f"t_occupancy{i}"] = occupancy_texture(renderer, layer, table, occupied)
     if surfaces is not None:
         textures["t_surface"] = surfaces
     uniforms = {**camera_uniforms(scene), **clip_uniforms(scene), **layer_uniforms(plan),
                 "u_step": plan.step, "u_max_segments": plan.max_segments}
     if plan.ert_transmittance > 0:
         uniforms["u_ert_transmittance"] = plan.ert_transmittance
+    if plan.occupancy is not None:
+        uniforms["u_brick"] = float(BRICK)
+        uniforms.update(occupied_boxes(plan, BRICK))
     bind(prog, textures, uniforms)
     kind, view_proj = union_proxy(scene, grow_pixels(ctx))
     return draw_ray_proxy(renderer, prog, scene, plan.target, kind, view_proj, surfaces)

@@ -28,6 +28,21 @@
 #ifndef GEOMETRY
 #define GEOMETRY 0
 #endif
+#ifndef SKIP_EMPTY
+#define SKIP_EMPTY 0      // composite: jump over bricks empty in every layer holding the ray
+#endif
+#ifndef LAYER0_OCCUPIED
+#define LAYER0_OCCUPIED 0 // layer k has no empty brick (skipping never looks it up)
+#endif
+#ifndef LAYER1_OCCUPIED
+#define LAYER1_OCCUPIED 0
+#endif
+#ifndef LAYER2_OCCUPIED
+#define LAYER2_OCCUPIED 0
+#endif
+#ifndef LAYER3_OCCUPIED
+#define LAYER3_OCCUPIED 0
+#endif
 #ifndef LAYER0_LABELS
 #define LAYER0_LABELS 0   // layer k is a label volume (nearest sample, label table)
 #endif
@@ -78,6 +93,21 @@ uniform sampler2D t_class2;
 #if N_LAYERS > 3
 uniform sampler3D t_layer3;
 uniform sampler2D t_class3;
+#endif
+#if SKIP_EMPTY
+uniform float u_brick;                   // brick edge in cells
+uniform vec3 u_occupied_lo[N_LAYERS];    // the box around the layer's occupied bricks, grown
+uniform vec3 u_occupied_hi[N_LAYERS];    //   by a sample (its own frame)
+uniform sampler3D t_occupancy0;          // per brick of the layer: 1 if anything in it has opacity
+  #if N_LAYERS > 1
+uniform sampler3D t_occupancy1;
+  #endif
+  #if N_LAYERS > 2
+uniform sampler3D t_occupancy2;
+  #endif
+  #if N_LAYERS > 3
+uniform sampler3D t_occupancy3;
+  #endif
 #endif
 
 out vec4 f_color;
@@ -151,6 +181,37 @@ void mixLayer(sampler3D volume, sampler2D table, int i, bool labels, vec3 o, vec
         opaque_count += 1.0;
     }
 }
+
+#if SKIP_EMPTY
+// Whether layer i's brick holding the ray's point at t is empty; if so t_exit is lowered
+// to where the ray (o + t d, the layer's frame) leaves that brick, else recheck is set
+// there (no skip can start before: a look-up saved, never a sample).
+bool emptyBrick(sampler3D occupancy, int i, vec3 o, vec3 d, float t, inout float t_exit, inout float recheck) {
+    vec3 size = u_brick * u_layer_spacing[i];
+    ivec3 brick = clamp(ivec3(floor((o + t * d) / size)), ivec3(0), textureSize(occupancy, 0) - 1);
+    vec3 lo = vec3(brick) * size;
+    vec3 t_far = max((lo - o) / d, (lo + size - o) / d);
+    float leave = min(min(t_far.x, t_far.y), t_far.z);
+    if (texelFetch(occupancy, brick, 0).r >= 0.5) {
+        recheck = leave;
+        return false;
+    }
+    t_exit = min(t_exit, leave);
+    return true;
+}
+
+// Layer i at t adds nothing from here to t_exit: it does not hold t, it has ended
+// (done), or its brick there is empty (never where it has no empty brick: full).
+#define SKIP_LAYER(occupancy, i, done, full) \
+    if (empty && span[i].x <= t && t <= span[i].y && !(done)) { \
+        if (full) { \
+            empty = false; \
+            recheck = span[i].y; \
+        } else { \
+            empty = emptyBrick(occupancy, i, o[i], d[i], t, t_exit, recheck); \
+        } \
+    }
+#endif
 
 // Added: layer i's own segment len long at the midpoint t composited into its own
 // (colour, opacity) until it ends (composite), or its value into its extreme or its
@@ -233,6 +294,18 @@ void main() {
     if (range.y <= range.x) return;
 #endif
     float t0 = range.x, t1 = range.y;
+#if SKIP_EMPTY
+    // Where the ray meets any layer's occupied box: a midpoint outside is in an empty
+    // brick of every layer that holds it.
+    float occupied_lo = 3.0e38, occupied_hi = -3.0e38;
+    for (int i = 0; i < N_LAYERS; ++i) {
+        vec2 occupied = intersectBox(o[i], d[i], u_occupied_lo[i], u_occupied_hi[i]);
+        if (occupied.y > occupied.x) {
+            occupied_lo = min(occupied_lo, occupied.x);
+            occupied_hi = max(occupied_hi, occupied.y);
+        }
+    }
+#endif
 
     // every layer's entry and exit, clamped to [t0, t1] (a layer the ray misses: t1), sorted
     float cut[N_CUTS];
@@ -284,12 +357,25 @@ void main() {
         if (!held) continue;
         int n = int(ceil((b - a) / u_step));
         float h = (b - a) / float(n);
-        for (int k = 0; k < n; ++k) {
+        int k_begin = 0, k_end = n;
+#if SKIP_EMPTY
+        // only the segments whose midpoint may be in [occupied_lo, occupied_hi] (one more
+        // each side, for rounding); the others add nothing but count against the budget
+        k_begin = int(clamp(floor((occupied_lo - a) / h - 0.5) - 1.0, 0.0, float(n)));
+        k_end = max(k_begin, int(clamp(ceil((occupied_hi - a) / h - 0.5) + 2.0, 0.0, float(n))));
+        budget -= k_begin;
+        float recheck = -3.0e38;    // no look-up before: a layer holding the ray is occupied up to here
+#endif
+        for (int k = k_begin; k < k_end; ++k) {
             if (budget <= 0) break;
             --budget;
             float t = a + (float(k) + 0.5) * h;
 #if BLEND_ADD
             bool all_done = true;
+  #if SKIP_EMPTY
+            float opacity_before = 0.0;
+            for (int i = 0; i < N_LAYERS; ++i) opacity_before += acc[i].a;
+  #endif
             addLayer(t_layer0, t_class0, 0, LAYER0_LABELS != 0, o[0], d[0], t, span[0], h, acc[0], done[0], best[0],
                      len_sum[0], all_done);
   #if N_LAYERS > 1
@@ -338,8 +424,58 @@ void main() {
             ended = ended || 1.0 - alpha_acc < u_ert_transmittance;
   #endif
 #endif
+#if SKIP_EMPTY
+            // Nothing composited: only now look at the bricks (occupied regions never pay
+            // for it). Where every layer holding t is in an empty brick (or has ended), each
+            // midpoint before the first of those bricks' exits adds exactly nothing: go on at
+            // the segment before the first midpoint past it (rounding can only make the ray
+            // look once more, never skip a sample; t is made from k, never accumulated).
+  #if BLEND_ADD
+            float opacity_after = 0.0;
+            for (int i = 0; i < N_LAYERS; ++i) opacity_after += acc[i].a;
+            bool blank = opacity_after == opacity_before;
+  #else
+            bool blank = opaque_count == 0.0 && tau == 0.0;
+  #endif
+            if (blank && !ended && t >= recheck) {
+                bool empty = true;
+                float t_exit = 3.0e38;
+  #if BLEND_ADD
+                SKIP_LAYER(t_occupancy0, 0, done[0], LAYER0_OCCUPIED != 0)
+    #if N_LAYERS > 1
+                SKIP_LAYER(t_occupancy1, 1, done[1], LAYER1_OCCUPIED != 0)
+    #endif
+    #if N_LAYERS > 2
+                SKIP_LAYER(t_occupancy2, 2, done[2], LAYER2_OCCUPIED != 0)
+    #endif
+    #if N_LAYERS > 3
+                SKIP_LAYER(t_occupancy3, 3, done[3], LAYER3_OCCUPIED != 0)
+    #endif
+  #else
+                SKIP_LAYER(t_occupancy0, 0, false, LAYER0_OCCUPIED != 0)
+    #if N_LAYERS > 1
+                SKIP_LAYER(t_occupancy1, 1, false, LAYER1_OCCUPIED != 0)
+    #endif
+    #if N_LAYERS > 2
+                SKIP_LAYER(t_occupancy2, 2, false, LAYER2_OCCUPIED != 0)
+    #endif
+    #if N_LAYERS > 3
+                SKIP_LAYER(t_occupancy3, 3, false, LAYER3_OCCUPIED != 0)
+    #endif
+  #endif
+                if (empty && t_exit > t) {
+                    float past = min((t_exit - a) / h - 0.5, float(n));
+                    int k_to = min(max(k, int(ceil(past)) - 2), k_end - 1);
+                    budget -= k_to - k;     // as if each skipped segment had been taken
+                    k = k_to;
+                }
+            }
+#endif
             if (ended) break;
         }
+#if SKIP_EMPTY
+        budget -= n - k_end;
+#endif
         if (ended) break;
     }
 
