@@ -366,7 +366,8 @@ def cmd_render(args, out=None):
     else:
         nz, ny, nx = volume.shape
         sx, sy, sz = (float(v) for v in volume.spacing)
-        print(f"volume     {args.input}: {nx}x{ny}x{nz} (x, y, z) {volume.data.dtype}, spacing {sx:g},{sy:g},{sz:g}, "
+        dtype = volume.dtype if hasattr(volume, "read") else volume.data.dtype   # (a store: a LazyVolume)
+        print(f"volume     {args.input}: {nx}x{ny}x{nz} (x, y, z) {dtype}, spacing {sx:g},{sy:g},{sz:g}, "
               f"values {lo:g}..{hi:g}", file=out)
     if tf_name == "auto":
         from ..model.transfer import auto_preset_name

@@ -107,7 +107,7 @@ def load_input(source, *, scalars=None, shape=None, dtype=None, spacing=None, or
         data, orientation = dvr_io.right_handed(source.data, orientation)     # no mirror image
         return Volume(data, spacing=source.spacing, origin=source.origin, mask_nonfinite=source.mask_nonfinite,
                       orientation=orientation, modality=source.modality), "auto"
-    if isinstance(source, TetMesh):
+    if isinstance(source, TetMesh) or _is_lazy(source):
         return source, "auto"
     if isinstance(source, np.ndarray):
         data, orientation = dvr_io.right_handed(source, orientation)
@@ -135,6 +135,10 @@ def load_input(source, *, scalars=None, shape=None, dtype=None, spacing=None, or
         return volume, preset
     if is_mesh_input(path, shape, dtype):
         return dvr_io.load_mesh(path, scalars=scalars), "auto"
+    from ..formats.stores import split_key, store_kind
+    store_path, _ = split_key(path)
+    if os.path.exists(store_path) and store_kind(store_path) in ("zarr", "hdf5"):   # read brick by brick
+        return dvr_io.open_volume(path, spacing=spacing, origin=origin), "auto"
     return dvr_io.load_volume(path, shape=shape, dtype=dtype, spacing=spacing, origin=origin,
                               mask_nonfinite=mask_nonfinite, orientation=orientation), "auto"
 
@@ -150,6 +154,28 @@ def _is_tf2d_file(path):
     return isinstance(spec, dict) and ("widgets" in spec or "table" in spec)
 
 
+def _is_lazy(data):
+    from ..model.lazy_volume import LazyVolume
+    return isinstance(data, LazyVolume)
+
+
+def range_tf(data, spec=None):
+    """A LazyVolume's transfer function (``tf`` None or "auto"): the warm ramp from the
+    middle of the range its brick summary gives to its top (the presets' percentiles
+    would read every sample). Other presets are an InputError naming ``tf``."""
+    if spec not in (None, "auto"):
+        raise InputError("tf", f"presets other than 'auto' read every sample's value; a store read brick by "
+                               f"brick takes 'auto' (a ramp over its summary's range), a JSON file or a "
+                               f"TransferFunction, got {spec!r}")
+    from ..model.transfer_function import TransferFunction
+    lo, hi = data.data_range
+    lo, hi = (lo + hi) / 2, (hi if hi > lo else lo + 1.0)
+    colors = _transfer().RAMPS["warm"]
+    xs = np.linspace(lo, hi, len(colors))
+    return TransferFunction(color=[(float(x), *c) for x, c in zip(xs, colors)], opacity=[(lo, 0.0), (hi, 0.5)],
+                            unit_distance=data.min_spacing)
+
+
 def resolve_tf(spec, data, default="auto"):
     """(name, transfer function) for ``spec``: None (the ``default`` preset), a preset
     name, a JSON file (``dvr_gl.model.transfer.load_tf_json``; with "widgets" or "table", a 2D
@@ -159,6 +185,8 @@ def resolve_tf(spec, data, default="auto"):
     from ..model.transfer import load_tf_json
     if isinstance(spec, (TransferFunction, TransferFunction2D)):
         return "given", spec
+    if _is_lazy(data) and (spec is None or str(spec) in PRESETS or str(spec).startswith("cmap:")):
+        return "range", range_tf(data, spec)
     if spec is None:
         return default, PRESETS[default](data)
     key = str(spec).replace("-", "_")
@@ -275,7 +303,9 @@ def render(source, *, tf=None, technique=None, size=(512, 512), azimuth=None, el
     backend is kept for the process, so later calls do not compile or upload again.
     ``clip_planes`` and ``crop_box`` cut the data as in :class:`dvr_gl.Scene`; ``geometry``:
     opaque :class:`dvr_gl.Surface` meshes (or surface files, read by
-    :func:`dvr_gl.formats.load_surface`) drawn with the data (technique raycast).
+    :func:`dvr_gl.formats.load_surface`) drawn with the data (technique raycast). A zarr
+    store or HDF5 file (or a LazyVolume) is read brick by brick by raycast, within
+    ``memory=`` bytes of bricks (a size such as "2GB"; ``techniques.lazy_bricks``).
 
     Several volumes (:mod:`dvr_gl.frontends.layer_inputs`; rendered by raycast, unlit):
     ``layers``: extra scans, each anything ``source`` may be (classified by its own

@@ -260,6 +260,9 @@ def add_render_options(r):
     r.add_argument("--brick-size", type=whole_number(1), metavar="N",
                    help="raycast: draw the volume in bricks of N cells a side, one texture each (the same "
                         "image to float rounding; default: bricks only where a side exceeds one 3-D texture)")
+    r.add_argument("--memory", type=_memory_size, metavar="SIZE",
+                   help="raycast of a store (zarr, HDF5): bytes of bricks held at once, e.g. 2GB or 512MiB "
+                        "(default: a quarter of the memory available)")
     r.add_argument("--interpolate", type=_count, metavar="K",
                    help="slice2d: K intermediate slices per cell (default: 0)")
     r.add_argument("--proxy", choices=("cpu", "vertex"),
@@ -411,7 +414,7 @@ TECHNIQUE_OPTIONS = {"interpolate": ("slice2d",), "proxy": ("slice3d",), "shells
                      "repetitions": ("particles",), "seed": ("particles",), "radius": ("particles", "splat"),
                      "sampler": ("particles",), "density": ("splat",), "cutoff": ("splat",), "kernel": ("splat",),
                      "gradients": ("raycast", "slice2d", "slice3d"), "tolerance": ("raycast", "tetra"),
-                     "brick_size": ("raycast",)}
+                     "brick_size": ("raycast",), "memory": ("raycast",)}
 
 #: the techniques that render meshes (cell projection); the others render grid volumes
 MESH_TECHNIQUES = ("tetra",)
@@ -428,6 +431,16 @@ def input_is_mesh(args):
     from .inputs import is_mesh_input
     return is_mesh_input(getattr(args, "input", None) or "", getattr(args, "shape", None),
                          getattr(args, "dtype", None))
+
+
+def _memory_size(text):
+    """--memory: a size such as 2GB, kept as given (dvr_gl.util.memory.parse_bytes)."""
+    from ..util.memory import parse_bytes
+    try:
+        parse_bytes(text, "--memory")
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
+    return text
 
 
 def technique_options(args):
@@ -447,7 +460,8 @@ def technique_options(args):
     if (getattr(args, "refine", None) or 1) > 1 and not getattr(args, "preintegrate", False):
         raise UsageError("--refine", f"cuts pre-integrated segments: add --preintegrate (got --refine {args.refine})")
     for name in ("step", "tolerance", "preintegrate", "refine", "interpolate", "proxy", "shells", "sort", "repetitions",
-                 "seed", "radius", "sampler", "kernel", "density", "cutoff", "gradients", "target", "brick_size"):
+                 "seed", "radius", "sampler", "kernel", "density", "cutoff", "gradients", "target", "brick_size",
+                 "memory"):
         value = getattr(args, name, None)
         if value is None or value is False:
             continue

@@ -128,6 +128,12 @@ class LazyVolume:
             brick_summary(self, DEFAULT_BRICK)
         return self._summary.data_range
 
+    @property
+    def has_nonfinite(self):
+        """False: a lazily read volume is taken as finite without reading it all; the ray
+        caster checks each brick it reads and names one with non-finite samples."""
+        return False
+
     # -- samples ---------------------------------------------------------------------
     def read(self, z0, z1, y0, y1, x0, x1):
         """The samples ``[z0:z1, y0:y1, x0:x1]`` as a NumPy array in the array's dtype

@@ -112,8 +112,10 @@ class Scene:
                  iso_value=None, shading=False, phong=(0.3, 0.7, 0.2, 32.0), lights=(HEADLIGHT,),
                  optical_model="emission_absorption", illustration=None, clip_planes=(), crop_box=None,
                  geometry=(), layers=(), blend="mix"):
-        if not isinstance(volume, (Volume, TetMesh)):
-            raise TypeError(f"volume must be a dvr_gl.Volume or dvr_gl.TetMesh, got {type(volume).__name__}")
+        from .lazy_volume import LazyVolume     # (a store read brick by brick: ray casting only)
+        if not isinstance(volume, (Volume, TetMesh, LazyVolume)):
+            raise TypeError(f"volume must be a dvr_gl.Volume or dvr_gl.TetMesh, got {type(volume).__name__} "
+                            f"(or, for raycast, a store read lazily: dvr_gl.model.lazy_volume.LazyVolume)")
         if not isinstance(tf, (TransferFunction, TransferFunction2D)):
             raise TypeError(f"tf must be a dvr_gl.TransferFunction or TransferFunction2D, got {type(tf).__name__}")
         if not isinstance(camera, Camera):
@@ -266,6 +268,12 @@ class Scene:
     def is_mesh(self):
         """True when the scene's data is a TetMesh (rendered by cell projection)."""
         return isinstance(self.volume, TetMesh)
+
+    @property
+    def is_lazy(self):
+        """True when the scene's data is a LazyVolume (samples read brick by brick)."""
+        from .lazy_volume import LazyVolume
+        return isinstance(self.volume, LazyVolume)
 
     @property
     def headlight_only(self):

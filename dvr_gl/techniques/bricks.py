@@ -31,7 +31,9 @@ the transfer function is never uploaded nor drawn (``brick_occupancy``, the test
 empty-space skipping): every sample it owns is exactly transparent.
 
 Brick textures are read through ``read_block(volume, z0, z1, y0, y1, x0, x1)``: a source
-with a ``read`` method of that signature (a lazily read store) plugs in there.
+with a ``read`` method of that signature (a lazily read store) plugs in there. A
+LazyVolume's emptiness comes from its brick summary (``lazy_occupied``) and its bricks
+through a BrickCache, one texture at a time (``LazyBrickTextures``; ``lazy_bricks``).
 """
 
 from __future__ import annotations
@@ -43,6 +45,8 @@ import numpy as np
 from ..gl.resources import texture3d
 from .common import TARGETS, bind, box_view, cleared_target, grow_pixels, tf_uniforms
 from .gpu import target_fbo, proxy_vao
+from ..model.lazy_volume import brick_summary
+from ..util.memory import BrickCache
 
 OPEN = 3.0e38   # the owned box's bound on the volume's outer faces
 MODES = ("composite", "mip", "minip", "average")
@@ -245,7 +249,9 @@ def brick_layout(renderer, volume, brick_size, halo):
 
 def occupied_bricks(renderer, plan, bricks, brick_size):
     """Per brick, whether any value it can show has non-zero opacity (all True where the
-    plan does not skip empty space)."""
+    plan does not skip empty space). A LazyVolume's from its summary (``lazy_bricks``)."""
+    if plan.lazy is not None:
+        return lazy_occupied(plan.scene.volume, bricks, brick_size, plan.lut, plan.lazy.skip_empty)
     if plan.occupancy is None:
         return np.ones(len(bricks), bool)
     volume, tf = plan.scene.volume, plan.scene.tf
@@ -270,22 +276,27 @@ class BrickTextures:
         if held is None:
             (z0, z1), (y0, y1), (x0, x1) = brick.samples
             block = read_block(self.volume, z0, z1, y0, y1, x0, x1)
-            name, defines, _ = texel_format(block.dtype, self.filter_exact)
-            offset = 0
-            if "BRICK_NORMALIZED" in defines:      # the brick's span fits 16 bits
-                offset = int(block.min())
-                tex = texture3d(self.ctx, (block.astype(np.int64) - offset).astype(np.uint16), 1, name, linear=True)
-            elif defines:     # nearest: an integer texture is incomplete with a linear filter
-                tex = texture3d(self.ctx, block, 1, name, linear=False)
-            else:
-                tex = texture3d(self.ctx, block.astype(np.float32), 1, "f4", linear=True)
-            held = self.textures[brick.samples] = (tex, float(offset))
+            held = self.textures[brick.samples] = upload_block(self.ctx, block, self.filter_exact)
         return held
 
     def release(self):
         for tex, _ in self.textures.values():
             tex.release()
         self.textures.clear()
+
+
+def upload_block(ctx, block, filter_exact):
+    """(texture, offset) of a brick's samples ``block`` (``texel_format``)."""
+    name, defines, _ = texel_format(block.dtype, filter_exact)
+    offset = 0
+    if "BRICK_NORMALIZED" in defines:      # the brick's span fits 16 bits
+        offset = int(block.min())
+        tex = texture3d(ctx, (block.astype(np.int64) - offset).astype(np.uint16), 1, name, linear=True)
+    elif defines:     # nearest: an integer texture is incomplete with a linear filter
+        tex = texture3d(ctx, block, 1, name, linear=False)
+    else:
+        tex = texture3d(ctx, block.astype(np.float32), 1, "f4", linear=True)
+    return tex, float(offset)
 
 
 def brick_textures(renderer, volume):
@@ -358,7 +369,8 @@ def draw(renderer, plan, prog, textures, brick_size):
         ctx.cull_face = "front"
     else:
         ctx.disable(ctx.CULL_FACE)
-    textures_of = brick_textures(renderer, volume)
+    textures_of = (brick_textures(renderer, volume) if plan.lazy is None
+                   else lazy_textures(renderer, volume, plan.lazy.memory, filter_is_exact(renderer)))
     for brick in order:
         tex, offset = textures_of.get(brick)
         tex.use(location=unit_volume)
@@ -392,3 +404,73 @@ def draw(renderer, plan, prog, textures, brick_size):
     last["u_view_proj"].write(np.eye(4, dtype="f4").tobytes())
     proxy_vao(renderer, last, "fullscreen").render()
     return out
+
+
+# ----------------------------------------------------------------------------- a LazyVolume's bricks
+# (plans: lazy_bricks.plan_lazy)
+
+def summary_for(volume, brick_size):
+    """The volume's summary for bricks of ``brick_size`` cells: its last one where that
+    has this brick size (any halo of at least 1 sample), else made (or read from the
+    cache folder) with the default halo."""
+    summary = getattr(volume, "_summary", None)
+    if summary is not None and summary.brick == (brick_size,) * 3 and summary.halo >= 1:
+        return summary
+    return brick_summary(volume, brick_size)
+
+
+def lazy_occupied(volume, bricks, brick_size, lut, skip_empty):
+    """Per brick of the partition, whether it can show anything, from the summary alone
+    (all True without skipping). A brick whose range is NaN (no finite sample) counts as
+    occupied, so that its read names the problem."""
+    if not skip_empty:
+        return np.ones(len(bricks), bool)
+    summary = summary_for(volume, brick_size)
+    lo = np.array([summary.lo[b.index] for b in bricks], np.float64)
+    hi = np.array([summary.hi[b.index] for b in bricks], np.float64)
+    unknown = np.isnan(lo) | np.isnan(hi)
+    occupied = np.ones(len(bricks), bool)
+    if (~unknown).any():
+        occupied[~unknown] = brick_occupancy((lo[~unknown], hi[~unknown]), lut)
+    return occupied
+
+
+class LazyBrickTextures:
+    """A LazyVolume's brick textures for ``draw``: each brick's samples from the
+    BrickCache, one texture on the GPU at a time."""
+
+    def __init__(self, ctx, volume, filter_exact, cache):
+        self.ctx = ctx
+        self.volume = volume
+        self.filter_exact = filter_exact
+        self.cache = cache
+        self.current = None
+
+    def read(self, brick):
+        (z0, z1), (y0, y1), (x0, x1) = brick.samples
+        block = read_block(self.volume, z0, z1, y0, y1, x0, x1)
+        if block.dtype.kind == "f" and not np.isfinite(block).all():
+            raise ValueError(f"bricked ray casting does not yet take non-finite samples: brick {brick.index} "
+                             f"(samples z {z0}:{z1}, y {y0}:{y1}, x {x0}:{x1}) of {self.volume.describe()} has some")
+        return block
+
+    def get(self, brick):
+        """(texture, offset) of ``brick``, as BrickTextures.get; the previous one is released."""
+        self.release()
+        key = tuple(v for pair in brick.samples for v in pair)
+        block = self.cache.get(self.volume, key, lambda: self.read(brick))
+        self.current = upload_block(self.ctx, block, self.filter_exact)
+        return self.current
+
+    def release(self):
+        if self.current is not None:
+            self.current[0].release()
+            self.current = None
+
+
+def lazy_textures(renderer, volume, memory, filter_exact):
+    """The volume's LazyBrickTextures with a BrickCache of ``memory`` bytes, kept for the
+    2 most recent (volume, budget) pairs."""
+    return renderer.resources.for_objects(
+        "lazy_brick_textures", volume, int(memory),
+        make=lambda: LazyBrickTextures(renderer.ctx, volume, filter_exact, BrickCache(int(memory))), capacity=2)

@@ -52,6 +52,9 @@ def check_scene(scene, technique, modes=None, data="volume"):
         raise ValueError(f"{technique} renders optical_model 'emission_absorption' only; "
                          f"{scene.optical_model!r} is rendered by {', '.join(SHADING_TECHNIQUES)}"
                          + (" (tetra: absorption and emission too)" if technique != "tetra" else ""))
+    if scene.is_lazy and technique != "raycast":
+        from .lazy_bricks import LazyVolumeTechniqueError     # (lazy_bricks imports this module)
+        raise LazyVolumeTechniqueError(technique)
     kinds = (data,) if isinstance(data, str) else tuple(data)      # a technique may take both
     if scene.is_mesh and "mesh" not in kinds:
         raise ValueError(f"{technique} renders a Volume (a grid); this scene holds a TetMesh: "

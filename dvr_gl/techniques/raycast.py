@@ -84,6 +84,10 @@ brick_size : None (default) or a whole number N: draw the volume in bricks of N 
     on from the image of the bricks in front), so the image is the single texture's up to
     the rounding of texture coordinates. Composite, mip, minip and average modes; not yet
     isosurfaces, pre-integration, geometry, gradient textures or masked samples (named errors).
+    A LazyVolume (a store) is always drawn in bricks, of its summary's size by default,
+    empty bricks known from the summary and never read (``techniques.lazy_bricks``).
+memory : a LazyVolume's budget for brick samples held at once, bytes or a size such as
+    "2GB" (default: a quarter of the memory available); smaller than one brick: an error.
 
 Opaque geometry (``Scene.geometry``): a pass before the ray casting finds each pixel's
 first surface and its lit colour (``techniques.geometry.surface_pass``); the ray ends
@@ -113,7 +117,9 @@ from .common import (add_optional_inputs, draw_ray_proxy, bind, box_proxy, box_v
                      check_step, check_target, preintegration_applies, preintegration_table, tf_uniforms, volume_uniforms)
 from .geometry import surface_pass
 from . import raycast_layers
-from .bricks import brick_occupancy, brick_size_for, bricked_defines, check_bricking, draw as draw_bricked
+from .bricks import (brick_occupancy, brick_size_for, bricked_defines, check_bricking, draw as draw_bricked,
+                     halo_for, unsupported)
+from .lazy_bricks import plan_lazy
 from .gpu import target_fbo, tf_texture, volume_texture
 
 BRICK = 8            # brick edge in cells, for empty-space skipping
@@ -145,6 +151,7 @@ class RaycastPlan:
     defines: dict = field(default_factory=dict)
     step_rows: np.ndarray | None = None    # LookupTable.step_table for this step, or None
     brick_size: int | None = None          # cells per brick side (bricks.py), None: as the volume needs
+    lazy: object = None                    # a LazyVolume's lazy_bricks.LazyBricking, else None
 
     @property
     def max_segments(self):
@@ -159,13 +166,13 @@ def default_step(volume):
 
 def make_plan(scene, step=None, *, target="rgba32f", jitter_seed=None, ert_transmittance=1e-3,
               skip_empty=True, preintegrate=False, refine=1, gradients="on_the_fly", step_table=True,
-              brick_size=None, tables=None):
+              brick_size=None, memory=None, tables=None):
     """Validate the options and decide what the scene needs. ``tables`` (a
     ``dvr_gl.util.cache.TableCache``) keeps the TF's lookup table and the volume's brick
     ranges between frames."""
     if isinstance(scene, Scene) and scene.layers:   # several volumes: raycast_layers plans them (same options)
         check_bricking(scene, brick_size, preintegrate, gradients)    # (not bricked yet: a named error)
-        return raycast_layers.make_plan(**{k: v for k, v in locals().items() if k != "brick_size"})
+        return raycast_layers.make_plan(**{k: v for k, v in locals().items() if k not in ("brick_size", "memory")})
     tables = tables or TableCache()
     check_scene(scene, "raycast")
     step = default_step(scene.volume) if step is None else check_step(step, scene.volume)
@@ -178,6 +185,13 @@ def make_plan(scene, step=None, *, target="rgba32f", jitter_seed=None, ert_trans
         raise ValueError(f"ert_transmittance must be in [0, 1), got {ert_transmittance!r}")
     check_flag("skip_empty", skip_empty)
     brick_size = check_bricking(scene, brick_size, preintegrate, gradients)
+    lazy = None
+    if scene.is_lazy:      # always bricked, emptiness from the summary (lazy_bricks)
+        unsupported(scene, preintegrate, gradients)
+        brick_size, lazy = plan_lazy(scene, brick_size, memory, skip_empty, halo_for(scene))
+    elif memory is not None:
+        raise ValueError(f"memory bounds the bricks read from a LazyVolume; this scene's volume is in memory "
+                         f"(got memory={memory!r})")
     if check_flag("preintegrate", preintegrate) and scene.mode != "composite":
         raise ValueError(f"preintegrate applies to mode 'composite' only, got mode {scene.mode!r}")
 
@@ -210,7 +224,7 @@ def make_plan(scene, step=None, *, target="rgba32f", jitter_seed=None, ert_trans
             bricks = tables.get("preint_occupancy", scene.volume, scene.tf, preint,
                                 make=lambda volume, tf, table: preint_occupancy(ranges, tf, table))
     occupancy = None
-    if skip_empty and composite and preint is None and not sabella:
+    if skip_empty and composite and preint is None and not sabella and lazy is None:
         # once per volume and once per (volume, TF) respectively, never per frame
         ranges = tables.get("brick_ranges", scene.volume, make=brick_value_ranges)
         occupancy = tables.get("occupancy", scene.volume, scene.tf,
@@ -247,7 +261,7 @@ def make_plan(scene, step=None, *, target="rgba32f", jitter_seed=None, ert_trans
     return RaycastPlan(scene=scene, step=step, lut=lut, target=target, jitter=jitter,
                        ert_transmittance=ert, occupancy=occupancy, preint=preint, defines=defines,
                        step_rows=step_rows, refine=int(refine), preint_fine=fine, bricks=bricks, detail=detail,
-                       reach=reach, reach_block=block, brick_size=brick_size)
+                       reach=reach, reach_block=block, brick_size=brick_size, lazy=lazy)
 
 
 def uses_step_table(scene, preint):
