@@ -16,6 +16,7 @@ from ..gl.programs import ProgramCache
 from ..gl.resources import ResourceStore
 from ..util.progress import Progress
 from ..util.cache import LRU, TableCache
+from ..util.memory import available_memory
 from ..techniques import check_options, get_technique
 
 
@@ -240,18 +241,6 @@ def tiles(width, height, edge):
 
 class ImageTooLarge(ValueError):
     """The image would not fit in memory."""
-
-
-def available_memory():
-    """Bytes of memory available to this process (Linux's MemAvailable), or None."""
-    try:
-        with open("/proc/meminfo") as f:
-            for line in f:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        pass
-    return None
 
 
 def check_image_memory(width, height, copies=1):

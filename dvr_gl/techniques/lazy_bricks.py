@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..model.lazy_volume import DEFAULT_BRICK
-from ..util.memory import BrickCache, parse_bytes
+from ..util.memory import BrickCache, available_memory, parse_bytes
 
 DEFAULT_MEMORY_FRACTION = 0.25      # of the memory available, when no budget is given
 FALLBACK_MEMORY = 2 ** 30           # where the memory available cannot be read
@@ -53,18 +53,6 @@ class LazyBricking:
     whether empty bricks are skipped (composite mode with skip_empty)."""
     memory: int
     skip_empty: bool
-
-
-def available_memory():
-    """Bytes of memory available (Linux's MemAvailable), or None."""
-    try:
-        with open("/proc/meminfo") as f:
-            for line in f:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        return None
-    return None
 
 
 @functools.lru_cache(maxsize=1)

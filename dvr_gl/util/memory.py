@@ -127,3 +127,15 @@ class BrickCache:
     def __repr__(self):
         return (f"BrickCache({format_bytes(self.budget)}, holding {len(self.items)} bricks, "
                 f"{format_bytes(self.nbytes)}; {self.hits} hits, {self.misses} misses)")
+
+
+def available_memory():
+    """Bytes of memory available to this process (Linux's MemAvailable), or None."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
