@@ -190,6 +190,28 @@ def test_bench_quick_smoke(renderer, tmp_path, monkeypatch, capsys):
     assert vtk["time_vs_vtk"] == 1.0 and vtk["rmse_vs_vtk"] == 1.0
     assert (tmp_path / "b.csv").read_text().startswith("dataset,")
     assert (tmp_path / "b.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_bench_error_size_measures_the_same_view_smaller(renderer, tmp_path, monkeypatch, capsys):
+    # --error-size: frames timed at --size, the error of each way measured at the smaller
+    # size on the same view, so the errors equal those of a run whose frames are that size
+    import argparse
+    import json
+
+    from dvr_gl.bench import cli, raycast as bench
+
+    monkeypatch.setenv("DVR_GL_CACHE", str(tmp_path / "cache"))
+    parser = cli.add_arguments(argparse.ArgumentParser())
+    rows = {}
+    for stem, extra in (("big", ["--size", "32", "--error-size", "16"]), ("small", ["--size", "16"])):
+        args = parser.parse_args(["--quick", "--repeats", "1", "--datasets", "head", "--steps", "1",
+                                  "--out", str(tmp_path / stem)] + extra)
+        assert cli.run_bench(args) == 0
+        rows[stem] = {r["renderer"]: r for r in json.loads((tmp_path / f"{stem}.json").read_text())["rows"]}
+    capsys.readouterr()
+    assert {r["width"] for r in rows["big"].values()} == {32}
+    for label, _, _ in bench.RENDERERS:       # the same ways at the same step: the same error
+        assert rows["big"][label]["rmse"] == pytest.approx(rows["small"][label]["rmse"], rel=1e-6, abs=1e-9)
     assert not [p for p in tmp_path.iterdir() if p.name.endswith(".tmp")]
 
 

@@ -57,8 +57,8 @@ def add_arguments(parser):
     parser.add_argument("--repetitions-list", default="1,4,16,64",
                         help="particles suite: the repetition counts (default 1,4,16,64)")
     parser.add_argument("--error-size", type=int, default=None,
-                        help="mesh, particles and shading suites: image size of the error measurement (default 128; "
-                             "32 with --quick)")
+                        help="image size of the error measurement: mesh, particles and shading suites (default 128; "
+                             "32 with --quick); peer suite (default: the frame's own size)")
     parser.add_argument("--data-dir", default=None,
                         help=f"mesh suite: the shared data folder (default $DVR_GL_DATA or {DEFAULT_DATA_DIR})")
     parser.add_argument("--vtk-float", action="store_true",

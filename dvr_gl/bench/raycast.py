@@ -75,6 +75,7 @@ def run(args, err=None):
     from ..reference.exact import exact as exact_image
 
     size = args.size
+    error_size = getattr(args, "error_size", None) or size
     names = [n.strip() for n in (args.datasets or "chest,head").split(",") if n.strip()]
     steps = [float(s) for s in args.steps.split(",") if s.strip()]
 
@@ -106,34 +107,42 @@ def run(args, err=None):
                                "data_as_float": bool(args.vtk_float)}
             for name, volume, tf, camera in sets:
                 scene = Scene(volume, tf, camera, width=size, height=size)
+                # the error is measured at --error-size (default: the frame's own size) on
+                # the same view: an exact image of a large frame takes minutes
+                error_scene = scene if error_size == size else scene.replace(width=error_size, height=error_size)
                 progress.begin(f"{name}: exact image")
-                exact = exact_image(scene)
+                exact = exact_image(error_scene)
                 progress.advance(f"{name}: exact image")
                 for step_vox in steps:
                     step = step_vox * volume.min_spacing
-                    calls = []
+                    calls, error_images = [], {}
                     vtk_rmse = None
                     if peer is not None:
+                        if error_scene is not scene:
+                            peer.setup(error_scene, step)
+                            error_images["vtk"] = peer.frame()
                         peer.setup(scene, step)  # the peer serves this scene only, here
-                        vtk_rmse = compare(peer.frame(), exact)["rmse"]
+                        vtk_rmse = compare(error_images.get("vtk", peer.frame()), exact)["rmse"]
+
+                    def gl_call(label, skip, target):
+                        if label == TOLERANCE_LABEL:
+                            return functools.partial(gl.render, target, technique="raycast",
+                                                     tolerance=max(vtk_rmse, 1e-12))
+                        if label == ADAPTIVE_LABEL:
+                            return functools.partial(gl.render, target, technique="raycast", step=step,
+                                                     **ADAPTIVE_OPTIONS)
+                        return functools.partial(gl.render, target, technique="raycast", step=step, skip_empty=skip)
+
                     for label, kind, skip in renderers:
-                        if kind == "vtk":
-                            calls.append(peer.frame)
-                        elif label == TOLERANCE_LABEL:
-                            calls.append(functools.partial(gl.render, scene, technique="raycast",
-                                                           tolerance=max(vtk_rmse, 1e-12)))
-                        elif label == ADAPTIVE_LABEL:
-                            calls.append(functools.partial(gl.render, scene, technique="raycast", step=step,
-                                                           **ADAPTIVE_OPTIONS))
-                        else:
-                            calls.append(functools.partial(gl.render, scene, technique="raycast",
-                                                           step=step, skip_empty=skip))
+                        calls.append(peer.frame if kind == "vtk" else gl_call(label, skip, scene))
                     images, times = interleaved_frames(
                         calls, args.repeats,
                         lambda k, i: progress.advance(
                             f"{name} step {step_vox:g}: {renderers[k][0]} "
                             + ("warm-up" if i < 0 else f"frame {i + 1}/{args.repeats}")))
                     for (label, kind, skip), image, ts in zip(renderers, images, times):
+                        if error_scene is not scene:      # the same way, rendered at the error size
+                            image = error_images["vtk"] if kind == "vtk" else gl_call(label, skip, error_scene)()
                         row = result_row(name, scene, label, kind, skip, step_vox, step, ts, compare(image, exact))
                         if label == TOLERANCE_LABEL:   # its own step, chosen for VTK's RMSE at this one
                             gl.render(scene, tolerance=max(vtk_rmse, 1e-12))
