@@ -29,7 +29,7 @@ import numpy as np
 
 from ..util.memory import cache_folder
 from .checks import _vector3
-from .volume import SUPPORTED_DTYPES, _modality, _orientation
+from .volume import SUPPORTED_DTYPES, GridGeometry, _modality, _orientation
 
 SUMMARY_VERSION = 1          # part of the summary's file name: a new layout is a new file
 DEFAULT_BRICK = 64           # cells a side, for data_range when no summary was asked for
@@ -46,7 +46,7 @@ class VolumeReadError(OSError):
                          f"x {block[4]}:{block[5]} of {source} failed: {type(error).__name__}: {error}")
 
 
-class LazyVolume:
+class LazyVolume(GridGeometry):
     """A structured scalar volume whose samples stay where they are stored.
 
     Parameters
@@ -95,25 +95,7 @@ class LazyVolume:
         self._digest = None
         self._summary = None
 
-    # -- geometry, as Volume -------------------------------------------------------
-    @property
-    def dims(self):
-        """Sample counts in x, y, z order."""
-        nz, ny, nx = self.shape
-        return np.array([nx, ny, nz])
-
-    @property
-    def extent(self):
-        return (self.dims - 1) * self.spacing
-
-    @property
-    def bounds(self):
-        return self.origin, self.origin + self.extent
-
-    @property
-    def min_spacing(self):
-        return float(self.spacing.min())
-
+    # -- geometry: dims, extent, bounds, min_spacing from GridGeometry ---------------
     @property
     def nbytes(self):
         """Bytes of all samples in their own dtype."""

@@ -13,7 +13,32 @@ from .checks import _vector3
 SUPPORTED_DTYPES = (np.uint8, np.uint16, np.int16, np.float32, np.float64)
 
 
-class Volume:
+class GridGeometry:
+    """Where a grid's samples lie, from its ``shape`` (nz, ny, nx), ``spacing`` and
+    ``origin`` (x, y, z): shared by a Volume and a LazyVolume."""
+
+    @property
+    def dims(self):
+        """Sample counts in x, y, z order."""
+        nz, ny, nx = self.shape
+        return np.array([nx, ny, nz])
+
+    @property
+    def extent(self):
+        """World size of the domain box, x, y, z."""
+        return (self.dims - 1) * self.spacing
+
+    @property
+    def bounds(self):
+        """(lower corner, upper corner) of the domain box in world units."""
+        return self.origin, self.origin + self.extent
+
+    @property
+    def min_spacing(self):
+        return float(self.spacing.min())
+
+
+class Volume(GridGeometry):
     """A structured scalar volume.
 
     Parameters
@@ -88,26 +113,6 @@ class Volume:
     def shape(self):
         """(nz, ny, nx)"""
         return self.data.shape
-
-    @property
-    def dims(self):
-        """Sample counts in x, y, z order."""
-        nz, ny, nx = self.data.shape
-        return np.array([nx, ny, nz])
-
-    @property
-    def extent(self):
-        """World size of the domain box, x, y, z."""
-        return (self.dims - 1) * self.spacing
-
-    @property
-    def bounds(self):
-        """(lower corner, upper corner) of the domain box in world units."""
-        return self.origin, self.origin + self.extent
-
-    @property
-    def min_spacing(self):
-        return float(self.spacing.min())
 
     def values(self, dtype=np.float64):
         """The samples as floats, non-finite ones replaced by 0 (they are masked)."""

@@ -202,16 +202,8 @@ class _Mix:
         field["pres"][j] = True
         field["coef"][j] = coef
         field["crit"][j] = E[:, 1:3]
-        # knots strictly between the ends of each monotone stretch (exact_one's search)
-        lo_v, hi_v = np.minimum(PE[:, :-1], PE[:, 1:]), np.maximum(PE[:, :-1], PE[:, 1:])
-        k_first = np.searchsorted(ex.K, lo_v, side="right")
-        n_cross = np.maximum(np.searchsorted(ex.K, hi_v, side="left") - k_first, 0).ravel()
-        stretch = np.repeat(np.arange(n_cross.size), n_cross)
-        pi, col = np.divmod(stretch, 3)
-        k = (np.repeat(k_first.ravel(), n_cross)
-             + np.arange(stretch.size) - np.repeat(np.cumsum(n_cross) - n_cross, n_cross))
-        knot_tau = one._solve(coef[pi], E[pi, col], E[pi, col + 1], ex.K[k]) if pi.size else np.zeros(0)
-        knot_s = ex.K[k]
+        # crossings of the TF's knots by each piece's cubic
+        pi, knot_s, knot_tau = one._knot_crossings(ex.K, coef, E, PE)
         # interior critical points where alpha reaches 1 (a touch of an opaque value)
         ci, cj = np.nonzero((E[:, 1:3] > -1) & (E[:, 1:3] < 1) & (ex.tf.opacity(PE[:, 1:3]) >= 1))
         cuts = (np.concatenate([j[pi], j[ci]]), np.concatenate([knot_tau, E[ci, cj + 1]]))

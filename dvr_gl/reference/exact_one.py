@@ -158,6 +158,23 @@ def _monotone_split(c, fa, fb):
     return E, PE
 
 
+def _knot_crossings(K, coef, E, PE):
+    """Where each piece's cubic crosses a knot of K: (piece, knot value, tau of the
+    crossing). The knots strictly between the values at the ends of each of a piece's
+    three monotone stretches (``_monotone_split``'s E, PE) are found by search, so that
+    many control points cost no more memory than a few; each crossing is then solved on
+    its stretch."""
+    lo_v, hi_v = np.minimum(PE[:, :-1], PE[:, 1:]), np.maximum(PE[:, :-1], PE[:, 1:])
+    k_first = np.searchsorted(K, lo_v, side="right")
+    n_cross = np.maximum(np.searchsorted(K, hi_v, side="left") - k_first, 0).ravel()
+    stretch = np.repeat(np.arange(n_cross.size), n_cross)
+    pi, j = np.divmod(stretch, 3)
+    k = (np.repeat(k_first.ravel(), n_cross)
+         + np.arange(stretch.size) - np.repeat(np.cumsum(n_cross) - n_cross, n_cross))
+    tau = _solve(coef[pi], E[pi, j], E[pi, j + 1], K[k]) if pi.size else np.zeros(0)
+    return pi, K[k], tau
+
+
 def _solve(c, lo, hi, target):
     """The root of cubic(x) = target in [lo, hi], where the cubic is monotone and
     cubic(lo) - target is zero or of the opposite sign to cubic(hi) - target. Newton
@@ -282,18 +299,8 @@ class _Classified:
         npc = len(busy)
 
         # breakpoints: crossings of knots (s known exactly there) ...
-        # (knots strictly between the values at the ends of a monotone stretch; found by
-        # search, so that many control points cost no more memory than a few)
-        lo_v, hi_v = np.minimum(PE[:, :-1], PE[:, 1:]), np.maximum(PE[:, :-1], PE[:, 1:])
-        k_first = np.searchsorted(self.K, lo_v, side="right")
-        n_cross = np.maximum(np.searchsorted(self.K, hi_v, side="left") - k_first, 0).ravel()
-        stretch = np.repeat(np.arange(n_cross.size), n_cross)
-        pi, j = np.divmod(stretch, 3)
-        k = (np.repeat(k_first.ravel(), n_cross)
-             + np.arange(stretch.size) - np.repeat(np.cumsum(n_cross) - n_cross, n_cross))
-        bt = [_solve(coef[pi], E[pi, j], E[pi, j + 1], self.K[k])] if pi.size else []
-        bs = [self.K[k]]
-        bp = [pi]
+        pi, knot_s, knot_tau = _knot_crossings(self.K, coef, E, PE)
+        bt, bs, bp = [knot_tau], [knot_s], [pi]
         # ... and interior critical points where alpha reaches 1 (a touch of an opaque value)
         crit = (E[:, 1:3] > -1) & (E[:, 1:3] < 1) & (self.tf.opacity(PE[:, 1:3]) >= 1)
         ci, cj = np.nonzero(crit)

@@ -44,7 +44,7 @@ import numpy as np
 
 from ..gl.resources import texture3d
 from .common import TARGETS, bind, box_view, cleared_target, grow_pixels, tf_uniforms
-from .gpu import target_fbo, proxy_vao
+from .gpu import cull_for_proxy, target_fbo, proxy_vao
 from ..model.lazy_volume import brick_summary
 from ..util.memory import BrickCache
 
@@ -364,11 +364,7 @@ def draw(renderer, plan, prog, textures, brick_size):
     pass_vao = proxy_vao(renderer, prog, kind)
     copy_vao = proxy_vao(renderer, copy, kind)
     ctx.disable(ctx.BLEND | ctx.DEPTH_TEST)
-    if kind == "box":
-        ctx.enable(ctx.CULL_FACE)
-        ctx.cull_face = "front"
-    else:
-        ctx.disable(ctx.CULL_FACE)
+    cull_for_proxy(ctx, kind)
     textures_of = (brick_textures(renderer, volume) if plan.lazy is None
                    else lazy_textures(renderer, volume, plan.lazy.memory, filter_is_exact(renderer)))
     for brick in order:

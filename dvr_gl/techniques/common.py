@@ -11,7 +11,7 @@ import numpy as np
 
 from ..model.camera import MAX_LIGHTS
 from ..model.scene import OPTICAL_MODELS, Scene
-from .gpu import cell_valid_texture, gradient_texture, preintegration_texture, proxy_vao, target_fbo, tf2d_texture
+from .gpu import cull_for_proxy, cell_valid_texture, gradient_texture, preintegration_texture, proxy_vao, target_fbo, tf2d_texture
 
 TARGETS = {"rgba32f": "f4", "rgba16f": "f2", "rgba8": "f1"}
 
@@ -590,11 +590,7 @@ def draw_ray_proxy(renderer, prog, scene, target, kind, view_proj, surfaces=None
     vao = proxy_vao(renderer, prog, kind)
     fbo = cleared_target(renderer, scene, target)
     ctx.disable(ctx.BLEND | ctx.DEPTH_TEST)
-    if kind == "box":
-        ctx.enable(ctx.CULL_FACE)
-        ctx.cull_face = "front"
-    else:
-        ctx.disable(ctx.CULL_FACE)
+    cull_for_proxy(ctx, kind)
     vao.render()
     ctx.disable(ctx.CULL_FACE)
     return fbo

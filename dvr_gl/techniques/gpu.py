@@ -138,3 +138,13 @@ _FULLSCREEN = np.array([[-1, -1, 0], [3, -1, 0], [-1, 3, 0]], np.float32)
 
 # the proxies of ``box_proxy``: the unit box's back faces, or one full-screen triangle
 PROXY_MESHES = {"box": _unit_cube_back_face_mesh, "fullscreen": lambda: _FULLSCREEN}
+
+
+def cull_for_proxy(ctx, kind):
+    """A box proxy draws its back faces only (one fragment a pixel); a full-screen
+    triangle is drawn whole."""
+    if kind == "box":
+        ctx.enable(ctx.CULL_FACE)
+        ctx.cull_face = "front"
+    else:
+        ctx.disable(ctx.CULL_FACE)
