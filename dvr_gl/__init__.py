@@ -21,6 +21,9 @@ def __getattr__(name):
     if name == "render":
         from .frontends.inputs import render
         return render
+    if name == "distributed":          # sort-last rendering on a Dask cluster (needs dask.distributed)
+        import importlib
+        return importlib.import_module(".frontends.distributed", __name__)
     if name in ("reference", "metrics"):
         import importlib
         return importlib.import_module(f".{name}", __name__)

@@ -320,3 +320,138 @@ def open_volume(path, key=None, lazy=True, spacing=None, origin=None, **load_opt
     nz, ny, nx = volume.shape
     return Volume(volume.read(0, nz, 0, ny, 0, nx), spacing=volume.spacing, origin=volume.origin,
                   **load_options)
+
+
+# ----------------------------------------------------------------------------- pyramids
+
+PYRAMID_SMALLEST = 32        # build_pyramid's default: halve until the largest side is at most this
+PYRAMID_BLOCK_BYTES = 64 * 2 ** 20   # a level is made from slabs of the finer one of about this size
+
+
+def pyramid_path(path):
+    """Where :func:`build_pyramid` writes by default: beside the store (or file), its
+    name with ``.pyramid.ome.zarr`` for its extension (``scan.zarr`` ->
+    ``scan.pyramid.ome.zarr``)."""
+    path = os.fspath(path).rstrip("/")
+    stem = os.path.basename(path)
+    for suffix in (".ome.zarr",) + STORE_SUFFIXES + (".gz",):
+        if stem.lower().endswith(suffix):
+            stem = stem[:-len(suffix)]
+    return os.path.join(os.path.dirname(path), stem + ".pyramid.ome.zarr")
+
+
+def pyramid_shapes(shape, levels=None):
+    """The shapes (nz, ny, nx) of a pyramid's levels from ``shape``: each level halves
+    every axis (n // 2) that keeps at least 2 samples; ``levels`` levels in all (level 0
+    included), or, when None, until the largest side is at most PYRAMID_SMALLEST."""
+    if levels is not None and (isinstance(levels, bool) or not isinstance(levels, (int, np.integer)) or levels < 1):
+        raise InputError("levels", f"must be a whole number of levels >= 1 (level 0 included), got {levels!r}")
+    shapes = [tuple(int(n) for n in shape)]
+    while len(shapes) < (levels if levels is not None else 64):
+        finer = shapes[-1]
+        if levels is None and max(finer) <= PYRAMID_SMALLEST:
+            break
+        coarser = tuple(n // 2 if n // 2 >= 2 else n for n in finer)
+        if coarser == finer:
+            raise InputError("levels", f"{levels} levels from shape {tuple(shape)} (z, y, x): level "
+                                       f"{len(shapes) - 1} ({finer}) cannot be halved again")
+        shapes.append(coarser)
+    return shapes
+
+
+def halve(block, factors):
+    """The mean of ``block``'s (z, y, x) groups of ``factors`` (each 1 or 2) samples,
+    in the block's dtype (integers rounded to nearest); a trailing odd sample is dropped."""
+    nz, ny, nx = (n // f for n, f in zip(block.shape, factors))
+    fz, fy, fx = factors
+    # 8- and 16-bit sums of at most 8 samples are exact in float32 (and a power of 2 divides them)
+    work = np.float32 if block.dtype.kind in "iu" and block.dtype.itemsize <= 2 else np.float64
+    groups = np.asarray(block[:nz * fz, :ny * fy, :nx * fx], work).reshape(nz, fz, ny, fy, nx, fx)
+    mean = groups.mean(axis=(1, 3, 5))
+    if block.dtype.kind in "iu":
+        info = np.iinfo(block.dtype)
+        mean = np.clip(np.rint(mean), info.min, info.max)
+    return mean.astype(block.dtype)
+
+
+def build_pyramid(path, out=None, levels=None, key=None, spacing=None, origin=None, chunks=64, overwrite=False,
+                  progress=True, block_bytes=PYRAMID_BLOCK_BYTES, **load_options):
+    """Write an OME-Zarr multiscale image (metadata 0.4, zarr v2) of the store or volume
+    file at ``path`` and return its path, read level by level, never whole.
+
+    Level 0 is the samples as they are; level ``k+1`` is the mean of each 2x2x2 group of
+    level ``k``'s samples (an axis that would keep fewer than 2 samples is not halved),
+    placed at the group's centre: its ``scale`` is twice level ``k``'s and its
+    ``translation`` half a level-``k`` spacing further, so the coarse samples sit where
+    the means belong (a level's bounds are inside the finer level's). ``levels``: how many
+    levels (level 0 included); default: until the largest side is at most
+    PYRAMID_SMALLEST. ``out``: default :func:`pyramid_path` (beside the store). The store
+    is written under a temporary name beside ``out`` and renamed when whole, so a store
+    at ``out`` is always complete; an existing ``out`` is an error unless ``overwrite``.
+    ``spacing``/``origin`` (x, y, z) replace the source's; ``chunks``: samples a side of
+    every level's chunks. Progress on stderr (``progress``). A file that is not a store
+    is read by :func:`dvr_gl.formats.load_volume` (with ``load_options``: a raw file's
+    ``shape`` and ``dtype``)."""
+    import shutil
+    zarr = _optional("zarr", "a zarr store")
+    source = open_volume(path, key=key, lazy=True, spacing=spacing, origin=origin, **load_options)
+    out = os.fspath(out) if out is not None else pyramid_path(split_key(path, key)[0])
+    if os.path.exists(out) and not overwrite:
+        raise InputError("out", f"{out!r} exists; give overwrite=True (--overwrite) to replace it")
+    if isinstance(chunks, bool) or not isinstance(chunks, (int, np.integer)) or chunks < 2:
+        raise InputError("chunks", f"must be a whole number of samples >= 2, got {chunks!r}")
+    shapes = pyramid_shapes(source.shape, levels)
+    spacings, origins = [np.asarray(source.spacing, float)], [np.asarray(source.origin, float)]
+    for finer, coarser in zip(shapes, shapes[1:]):
+        factors = np.array([f // c for f, c in zip(finer, coarser)][::-1], float)     # x, y, z
+        origins.append(origins[-1] + 0.5 * (factors - 1) * spacings[-1])
+        spacings.append(spacings[-1] * factors)
+    tmp = os.path.join(os.path.dirname(os.path.abspath(out)), f".{os.path.basename(out)}.{os.getpid()}.tmp")
+    if os.path.exists(tmp):
+        shutil.rmtree(tmp)
+    bar = None
+    try:
+        group = zarr.open_group(tmp, mode="w", zarr_format=2)
+        arrays = [group.create_array(str(k), shape=s, chunks=tuple(min(chunks, n) for n in s), dtype=source.dtype)
+                  for k, s in enumerate(shapes)]
+        slab = max(2, int(block_bytes // max(1, shapes[0][1] * shapes[0][2] * source.dtype.itemsize)) // 2 * 2)
+        slabs = [list(range(0, s[0], slab)) for s in shapes[:-1]]
+        if progress:
+            from ..util.progress import Progress
+            bar = Progress(sum(len(s) for s in slabs) + len(range(0, shapes[0][0], slab)))
+            bar.begin(f"pyramid of {source.describe()}: level 0")
+        nz, ny, nx = shapes[0]
+        for z0 in range(0, nz, slab):          # level 0: copied
+            arrays[0][z0:min(nz, z0 + slab)] = source.read(z0, min(nz, z0 + slab), 0, ny, 0, nx)
+            if bar is not None:
+                bar.advance()
+        for k in range(1, len(shapes)):
+            finer, coarser = shapes[k - 1], shapes[k]
+            factors = tuple(f // c for f, c in zip(finer, coarser))
+            if bar is not None:
+                bar.begin(f"pyramid of {source.describe()}: level {k} {coarser[2]}x{coarser[1]}x{coarser[0]}")
+            for z0 in slabs[k - 1]:
+                z1 = min(finer[0], z0 + slab)
+                c0, c1 = z0 // factors[0], min(coarser[0], z1 // factors[0])
+                if c1 > c0:
+                    arrays[k][c0:c1] = halve(arrays[k - 1][c0 * factors[0]:c1 * factors[0]], factors)
+                if bar is not None:
+                    bar.advance()
+        axes = [{"name": a, "type": "space"} for a in "zyx"]
+        datasets = [{"path": str(k), "coordinateTransformations": [
+            {"type": "scale", "scale": [float(v) for v in spacings[k][::-1]]},
+            {"type": "translation", "translation": [float(v) for v in origins[k][::-1]]}]}
+            for k in range(len(shapes))]
+        group.attrs["multiscales"] = [{"version": "0.4", "name": os.path.basename(source.describe()), "axes": axes,
+                                       "datasets": datasets, "type": "mean of 2x2x2",
+                                       "metadata": {"made_by": "dvr_gl.formats.stores.build_pyramid"}}]
+        if os.path.exists(out):         # overwrite: the old store goes only once the new one is whole
+            shutil.rmtree(out)
+        os.rename(tmp, out)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    finally:
+        if bar is not None:
+            bar.close()
+    return out

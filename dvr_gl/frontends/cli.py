@@ -74,6 +74,16 @@ def build_parser(bench_module=None):
     r.add_argument("--transparent", action="store_true",
                    help="write un-premultiplied RGBA instead of RGB over the background")
     add_render_options(r)
+    r.add_argument("--workers", type=int, metavar="N",
+                   help="render sort-last on a local Dask cluster of N worker processes (dvr_gl.distributed)")
+    r.add_argument("--scheduler", metavar="ADDRESS",
+                   help="render sort-last on the Dask cluster of the scheduler at ADDRESS (tcp://host:8786)")
+    r.add_argument("--build-pyramid", action="store_true",
+                   help="write INPUT's OME-Zarr pyramid beside it once (NAME.pyramid.ome.zarr, reused when "
+                        "there) and render from it; with --tolerance E the coarsest level within E is drawn")
+    r.add_argument("--pyramid-levels", type=int, metavar="N",
+                   help="--build-pyramid: N levels, level 0 included (default: halved until the largest side "
+                        "is at most 32 samples)")
 
     from .movie import add_movie_parser    # the movie command lives in its own module
     add_movie_parser(sub)
@@ -289,6 +299,10 @@ def cmd_render(args, out=None):
     check_dtype_option(args)
 
     t0 = time.perf_counter()
+    if getattr(args, "pyramid_levels", None) is not None and not args.build_pyramid:
+        raise UsageError("--pyramid-levels", "is the number of levels --build-pyramid writes; give --build-pyramid")
+    if getattr(args, "build_pyramid", False):
+        args.input = _pyramid_input(args, out)
     data = load_layered_args(args)      # the input's volume and TF, and any more volumes
     volume, tf_name, tf = data.volume, data.tf_name, data.tf
     if args.gradients is not None and not (args.shading or mode == "isosurface" or args.illustration
@@ -331,12 +345,17 @@ def cmd_render(args, out=None):
     from ..rendering.renderer import Renderer
     renderer_kwargs = {"backend": args.backend}
     t1 = time.perf_counter()
-    with Renderer(**renderer_kwargs) as renderer:
-        t2 = time.perf_counter()
-        image = renderer.render(scene, **render_kwargs)
-        t3 = time.perf_counter()
-        backend = _backend_name(renderer, args.backend)
-        choice = renderer.last_choice if "tolerance" in render_kwargs else None
+    if args.workers is not None or args.scheduler is not None:    # sort-last on a Dask cluster
+        from .distributed import render_for_cli
+        image, t2, t3, backend = render_for_cli(scene, render_kwargs, args.workers, args.scheduler, args.backend)
+        choice = None
+    else:
+        with Renderer(**renderer_kwargs) as renderer:
+            t2 = time.perf_counter()
+            image = renderer.render(scene, **render_kwargs)
+            t3 = time.perf_counter()
+            backend = _backend_name(renderer, args.backend)
+            choice = renderer.last_choice if "tolerance" in render_kwargs else None
     dvr_io.save_png(args.out, image, background=args.background)
 
     lo, hi = volume.data_range
@@ -352,6 +371,8 @@ def cmd_render(args, out=None):
     if choice is not None and scene.is_mesh:
         step = (f"{choice.label} for tolerance {choice.tolerance:g} (pilot RMSE {choice.pilot_rmse:.2g} at "
                 f"{choice.pilot_size[0]}x{choice.pilot_size[1]}, pilot {choice.pilot_seconds:.2f} s)")
+    elif choice is not None and hasattr(choice, "level"):      # a pyramid's level (rendering.pyramid)
+        step = choice.describe()
     elif choice is not None:
         step = (f"step {choice.step:g} ({choice.step_voxels:.3g} voxel) for tolerance {choice.tolerance:g}, "
                 f"predicted RMSE {choice.predicted_rmse:.2g}")
@@ -378,10 +399,37 @@ def cmd_render(args, out=None):
     print(f"rendered   {args.technique}, mode {mode}" + (f" {args.iso:g}" if mode == "isosurface" else "")
           + (", lit" if scene.shading else "")
           + f", {step}, {width}x{height}, {view}, backend {backend}", file=out)
+    if choice is not None and hasattr(choice, "level"):
+        tried = ", ".join(f"{level}@{k:g} {bound:.3g}" for level, k, bound in choice.trials) or "none"
+        print(f"levels     measured (level@step in its voxels, error bound): {tried}; level 0's reference "
+              f"error {choice.reference_error:.2g}", file=out)
     print(f"time       load {t_load:.3f} s, GL context {t2 - t1:.3f} s, first frame {t3 - t2:.3f} s "
           "(includes shader compile and upload)", file=out)
     print(f"wrote      {args.out}" + (" (RGB over background)" if args.background else " (RGBA)"), file=out)
     return 0
+
+
+def _pyramid_input(args, out):
+    """--build-pyramid: the pyramid beside INPUT (written now unless there already)."""
+    from ..formats.stores import build_pyramid, pyramid_path, split_key
+    source, key = split_key(args.input, getattr(args, "key", None))
+    path = pyramid_path(source)
+    if getattr(args, "key", None) is not None:      # the key named the array in INPUT, not in its pyramid
+        args.key = None
+    if os.path.exists(path):
+        print(f"pyramid    {path} (there already: reused)", file=out)
+        return path
+    load = {name: getattr(args, name) for name in ("shape", "dtype") if getattr(args, name, None) is not None}
+    t0 = time.perf_counter()
+    try:
+        build_pyramid(source, out=path, key=key, levels=args.pyramid_levels, spacing=getattr(args, "spacing", None),
+                      origin=getattr(args, "origin", None), **load)
+    except dvr_io.InputError as e:
+        if e.field != "levels":
+            raise
+        raise UsageError("--pyramid-levels", e.detail) from None
+    print(f"pyramid    wrote {path} in {time.perf_counter() - t0:.2f} s", file=out)
+    return path
 
 
 def _backend_name(renderer, requested):

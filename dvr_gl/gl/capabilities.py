@@ -3,6 +3,8 @@ small program (``harness.evaluate``), and handed to the program cache as switche
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 from .context import current
@@ -45,3 +47,90 @@ def max_3d_texture_size(ctx) -> int:
     with current(ctx):
         size = ctx.info.get("GL_MAX_3D_TEXTURE_SIZE")
     return int(size) if size else 256
+
+
+# the bare loop both stages run: a column of trilinear reads per pixel
+_PROBE_LOOP = """
+uniform sampler3D t_probe;
+uniform int u_samples;
+vec4 probeColumn(vec2 pixel) {
+    float acc = 0.0;
+    for (int i = 0; i < u_samples; ++i)
+        acc += texture(t_probe, vec3(pixel / 256.0, (float(i) + 0.5) / float(u_samples))).r;
+    return vec4(acc, 0.0, 0.0, 1.0);
+}
+"""
+COMPUTE_MARGIN = 3.0    # the compute stage is taken only where it is this much faster
+
+
+def pixel_stage_times(ctx, side=256, min_seconds=2e-3):
+    """Seconds of the same per-pixel loop of trilinear reads run as a fragment shader
+    over a full-screen triangle and as a compute shader, one invocation a pixel
+    (``{"fragment": s, "compute": s}``; no "compute" below GL 4.3). The loop is lengthened
+    until the fragment pass takes ``min_seconds``, so that a fast GPU's times are not
+    its launch overhead. GPUs built for compute may run fragment shaders on a few of
+    their cores only (NVIDIA's H100 and H200: two of their texture processing clusters),
+    where the compute stage reaches the whole chip."""
+    if ctx.version_code < 430:
+        return {"fragment": 1.0}
+    with current(ctx):
+        data = np.random.default_rng(0).random((64, 64, 64)).astype(np.float32)
+        tex = ctx.texture3d((64, 64, 64), 1, data.tobytes(), dtype="f4")
+        tex.filter = (ctx.LINEAR, ctx.LINEAR)
+        target = ctx.texture((side, side), 4, dtype="f4")
+        fbo = ctx.framebuffer(color_attachments=[target])
+        frag = ctx.program(
+            vertex_shader="#version 330 core\nvoid main() { vec2 p = vec2(gl_VertexID == 1 ? 3.0 : -1.0, "
+                          "gl_VertexID == 2 ? 3.0 : -1.0); gl_Position = vec4(p, 0.0, 1.0); }",
+            fragment_shader="#version 330 core\n" + _PROBE_LOOP
+                            + "out vec4 f_color;\nvoid main() { f_color = probeColumn(gl_FragCoord.xy); }")
+        comp = ctx.compute_shader(
+            "#version 430 core\nlayout(local_size_x = 8, local_size_y = 8) in;\n"
+            "layout(rgba32f, binding = 0) uniform writeonly image2D u_target;\n" + _PROBE_LOOP
+            + "void main() { imageStore(u_target, ivec2(gl_GlobalInvocationID.xy), "
+              "probeColumn(vec2(gl_GlobalInvocationID.xy) + 0.5)); }")
+        vao = ctx.vertex_array(frag, [])
+        try:
+            tex.use(0)
+            for prog in (frag, comp):
+                prog["t_probe"].value = 0
+
+            def fragment_pass():
+                fbo.use()
+                vao.render(vertices=3)
+
+            def compute_pass():
+                target.bind_to_image(0, read=False, write=True)
+                comp.run(side // 8, side // 8, 1)
+                ctx.memory_barrier()
+
+            def seconds(run):       # (wall time to glFinish: llvmpipe's timer queries miss compute work)
+                run()
+                ctx.finish()
+                times = []
+                for _ in range(5):
+                    start = time.perf_counter()
+                    run()
+                    ctx.finish()
+                    times.append(time.perf_counter() - start)
+                return min(times)       # (the least disturbed by other work on the machine)
+
+            samples = 16
+            while True:
+                for prog in (frag, comp):
+                    prog["u_samples"].value = samples
+                fragment = seconds(fragment_pass)
+                if fragment >= min_seconds or samples >= 4096:
+                    break
+                samples *= 4
+            return {"fragment": fragment, "compute": seconds(compute_pass)}
+        finally:
+            for obj in (vao, frag, comp, fbo, target, tex):
+                obj.release()
+
+
+def prefers_compute_stage(ctx) -> bool:
+    """Whether per-pixel ray shaders run faster as compute shaders on ``ctx``
+    (``pixel_stage_times``: by COMPUTE_MARGIN or more; llvmpipe runs both alike)."""
+    times = pixel_stage_times(ctx)
+    return "compute" in times and times["fragment"] >= COMPUTE_MARGIN * times["compute"]

@@ -16,6 +16,7 @@ import moderngl
 
 BACKENDS = ("egl", "osmesa")
 REQUIRED_GL = 330
+COMPUTE_GL = 430      # compute shaders
 
 INSTALL_HINT = {
     "egl": "install Mesa's EGL (Debian/Ubuntu: apt-get install libegl1 libegl-mesa0 libgl1-mesa-dri)",
@@ -128,7 +129,12 @@ def egl_library():
 
 
 def _create_egl():
-    ctx = moderngl.create_context(standalone=True, backend="egl", require=REQUIRED_GL)
+    # 4.3 where the driver has it (compute shaders: techniques.gpu.pixel_stage); EGL
+    # drivers may give exactly the version asked for, so ask for it first
+    try:
+        ctx = moderngl.create_context(standalone=True, backend="egl", require=COMPUTE_GL)
+    except Exception:
+        ctx = moderngl.create_context(standalone=True, backend="egl", require=REQUIRED_GL)
     egl = egl_library()
     if egl is not None:
         with ctx:  # moderngl makes it current: note which EGL display and context it is

@@ -59,7 +59,8 @@ def resolve_includes(name: str, root: Path | None = None, _stack=None, _seen=Non
             raise ShaderSourceError("circular #include: " + " -> ".join(stack + [child]))
         if child not in seen:
             out.append(resolve_includes(child, root, stack, seen))
-            out.append(f"#line {lineno + 1}")
+            if lineno < len(lines):     # (a #line with no line after it is an error on some GPUs)
+                out.append(f"#line {lineno + 1}")
     if len(stack) > 1:
         out.append(f"// --- end of \"{name}\" ---")
     stack.pop()
@@ -137,10 +138,52 @@ class ProgramCache:
             self.sources[key] = (vs, fs) if gs is None else (vs, fs, gs)
         return prog
 
+    def compute(self, fragment: str, defines: dict | None = None):
+        """The per-pixel fragment shader ``fragment`` built as a compute shader
+        (``COMPUTE_PIXELS``, common/pixel_stage.glsl: one invocation per target pixel, 8x8
+        a group), GLSL 4.30; a :class:`ComputeProgram`."""
+        defines = dict(defines or {}, COMPUTE_PIXELS=1)
+        key = ("compute", fragment, tuple(sorted(defines.items())))
+        prog = self._programs.get(key)
+        if prog is None:
+            defines = {**_only_declared(fragment, self.context_defines), **defines}
+            source = build_source(fragment, defines)
+            if "\n#version 330 core\n" not in "\n" + source:
+                raise ShaderSourceError(f"{fragment}: a per-pixel shader for the compute stage is "
+                                        f"'#version 330 core'")
+            source = ("\n" + source).replace("\n#version 330 core\n", "\n#version 430 core\n", 1)[1:]
+            prog = ComputeProgram(self.ctx.compute_shader(source))
+            self._programs[key] = prog
+            self.sources[key] = (source,)
+        return prog
+
     def release(self):
         for prog in self._programs.values():
             prog.release()
         self._programs.clear()
+
+
+class ComputeProgram:
+    """A compute shader with a program's lookups (``name in prog``, ``prog[name]``), so
+    that the techniques bind it as they bind a fragment program."""
+
+    def __init__(self, shader):
+        self.shader = shader
+
+    def __contains__(self, name):
+        return name in self.shader._members
+
+    def __iter__(self):
+        return iter(self.shader._members)
+
+    def __getitem__(self, name):
+        return self.shader[name]
+
+    def run(self, groups_x, groups_y):
+        self.shader.run(groups_x, groups_y, 1)
+
+    def release(self):
+        self.shader.release()
 
 
 def _only_declared(name, defines):

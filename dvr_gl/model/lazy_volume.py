@@ -138,6 +138,34 @@ class LazyVolume(GridGeometry):
                 f"got shape {data.shape} dtype {data.dtype}, expected {expected} {self.dtype}"))
         return data
 
+    def read_chunked(self, z0, z1, y0, y1, x0, x1, cache):
+        """The samples ``[z0:z1, y0:y1, x0:x1]`` put together from the whole chunks they
+        meet, each read once through ``cache`` (a ``util.memory.BrickCache``, keyed by
+        the chunk's index (cz, cy, cx)). A brick's block with its halo meets up to 27
+        chunks; read alone, each brick would read (and a dask array compute, a zarr
+        store decode) all of them again for a few samples. Reads directly where the array
+        has no chunks."""
+        if self.chunks is None:
+            return self.read(z0, z1, y0, y1, x0, x1)
+        block = (z0, z1, y0, y1, x0, x1)
+        out = np.empty((z1 - z0, y1 - y0, x1 - x0), self.dtype)
+        size = self.chunks
+        spans = [range(lo // c, (hi - 1) // c + 1) for lo, hi, c in zip(block[0::2], block[1::2], size)]
+        for cz in spans[0]:
+            for cy in spans[1]:
+                for cx in spans[2]:
+                    index = (cz, cy, cx)
+                    first = [i * c for i, c in zip(index, size)]
+                    last = [min(n, f + c) for f, c, n in zip(first, size, self.shape)]
+                    chunk = cache.get(self, index, lambda: self.read(first[0], last[0], first[1], last[1],
+                                                                   first[2], last[2]))
+                    lo = [max(b, f) for b, f in zip(block[0::2], first)]
+                    hi = [min(b, e) for b, e in zip(block[1::2], last)]
+                    out[lo[0] - z0:hi[0] - z0, lo[1] - y0:hi[1] - y0, lo[2] - x0:hi[2] - x0] = \
+                        chunk[lo[0] - first[0]:hi[0] - first[0], lo[1] - first[1]:hi[1] - first[1],
+                              lo[2] - first[2]:hi[2] - first[2]]
+        return out
+
     def read_brick(self, brick, index, halo=DEFAULT_HALO):
         """The samples of brick ``index`` (bz, by, bx) of ``brick`` cells a side, with
         ``halo`` samples around it: see :func:`brick_block`."""

@@ -111,8 +111,10 @@ class TetMesh:
     @property
     def bounds(self):
         """(lower corner, upper corner) of the points' bounding box, world units."""
-        lo, hi = self.points.min(axis=0), self.points.max(axis=0)
-        return lo, hi
+        if "bounds" not in self._derived:     # (points are read-only: made once, asked every frame)
+            self._derived["bounds"] = (self.points.min(axis=0), self.points.max(axis=0))
+        lo, hi = self._derived["bounds"]
+        return lo.copy(), hi.copy()
 
     @property
     def origin(self):

@@ -67,6 +67,9 @@ def _refined_segments(plan, s_front, s_back, a, length, midpoints, sample, light
     if light is not None:
         light = RayLighting(light.terms, light.origins[rows], light.dirs[rows])
     b_r = a_r + len_r
+    if plan.defines.get("REACH_WALK"):
+        out[rows] = _reach_pieces(plan, s_front[rows], s_back[rows], a_r, b_r, bound[rows], sample, rows, light)
+        return out
     cuts = [a_r[:, None] + len_r[:, None] * np.arange(1, plan.refine)[None, :] / plan.refine]
     origins, dirs = sample.rays(rows)
     spacing = np.asarray(volume.spacing, np.float64)
@@ -104,6 +107,44 @@ def _refined_segments(plan, s_front, s_back, a, length, midpoints, sample, light
             break
     out[rows] = acc
     return out
+
+
+def _reach_pieces(plan, s_front, s_back, a, b, bound, sample, rows, light):
+    """Twin of the walk by reach (``shaders/common/reach_walk.glsl``, REACH_WALK): from
+    each piece's front value, a piece as long as the field cannot reach the TF's detail
+    (value distance / gradient bound), at least ``(b - a) / refine``, cut at the next
+    cell face only where shorter; pieces read from the fine table, lit at their
+    midpoints and composited front to back. Returns (n, 4)."""
+    volume = plan.scene.volume
+    spacing = np.asarray(volume.spacing, np.float64)
+    origins, dirs = sample.rays(rows)
+    part = (b - a) / plan.refine
+    lo, hi = plan.detail[:, 0], plan.detail[:, 1]
+    acc = np.zeros((len(a), 4))
+    t, s = a.copy(), s_front.copy()
+    live = np.flatnonzero(t < b)
+    while live.size:
+        distance = np.maximum(np.maximum(lo[None, :] - s[live, None], s[live, None] - hi[None, :]), 0.0).min(axis=1) \
+            if len(lo) else np.full(live.size, np.inf)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            free = distance / np.maximum(bound[live], 1e-30)
+            index = (origins[live] + t[live, None] * dirs[live]) / spacing
+            face = np.where(dirs[live] < 0, np.ceil(index - 1e-4) - 1, np.floor(index + 1e-4) + 1)
+            t_face = np.where(dirs[live] != 0, (face * spacing - origins[live]) / dirs[live], np.inf).min(axis=1)
+        t_next = np.minimum(t[live] + np.maximum(free, part[live]), b[live])
+        t_next = np.where(free < part[live], np.minimum(t_next, t_face), t_next)
+        done = t_next >= b[live]
+        s_next = s_back[live].copy()
+        if (~done).any():
+            s_next[~done] = sample(t_next[~done], rows[live[~done]])
+        piece = plan.preint_fine.segment(s[live], s_next, t_next - t[live])
+        if light is not None:
+            piece = RayLighting(light.terms, light.origins[live], light.dirs[live]).segments(
+                piece, 0.5 * (t[live] + t_next))
+        acc[live] = blend_under(acc[live], piece)
+        t[live], s[live] = t_next, s_next
+        live = live[~done]
+    return acc
 
 
 class _RowSampler:

@@ -7,10 +7,11 @@ from __future__ import annotations
 
 import copy
 import math
+import os
 
 import numpy as np
 
-from ..gl.capabilities import context_defines
+from ..gl.capabilities import context_defines, prefers_compute_stage
 from ..gl.context import context_lost, current, describe, shared_context
 from ..gl.programs import ProgramCache
 from ..gl.resources import ResourceStore
@@ -59,6 +60,7 @@ class Renderer:
         self.resources = ResourceStore(self.ctx)  # what techniques keep on the GPU, by kind and key
         self.created = self.resources.created  # a log of (kind, shape or detail) for every resource made
         self.tables = TableCache()
+        self.rows_top_down_wanted, self.top_down_target = False, None    # (_draw, read_target)
         self._error_models = LRU(64)   # tolerance: pilot view and options -> tolerance.ErrorModel
         self._tolerance_picks = LRU(64)  # tolerance: pilot view, options and RMSE -> the Choice timed fastest
         self._mesh_picks = LRU(64)     # a mesh's tolerance: view family, size and RMSE -> mesh_tolerance.MeshChoice
@@ -101,6 +103,24 @@ class Renderer:
         with current(self.ctx):  # another library (VTK) may have made its own context current
             return dict(describe(self.ctx), backend=self.backend)
 
+    @property
+    def compute_stage_faster(self) -> bool:
+        """Whether per-pixel ray shaders run faster on this GPU as compute shaders than as
+        fragment shaders (``capabilities.prefers_compute_stage``: measured once per
+        process and device; ``DVR_GL_PIXEL_STAGE=fragment|compute`` decides instead).
+        The ray caster's ``stage="auto"`` follows it."""
+        forced = os.environ.get("DVR_GL_PIXEL_STAGE")
+        if forced:
+            if forced not in ("fragment", "compute"):
+                raise ValueError(f"DVR_GL_PIXEL_STAGE must be 'fragment' or 'compute', got {forced!r}")
+            return forced == "compute"
+        with current(self.ctx):
+            device = (self.ctx.info.get("GL_VENDOR"), self.ctx.info.get("GL_RENDERER"),
+                      self.ctx.info.get("GL_VERSION"))
+            if device not in _COMPUTE_FASTER:
+                _COMPUTE_FASTER[device] = prefers_compute_stage(self.ctx)
+        return _COMPUTE_FASTER[device]
+
     # -- rendering --------------------------------------------------------------------
     def render(self, scene, technique="raycast", step=None, tolerance=None, **options):
         """Render ``scene``; see the technique's module for its options. Images larger
@@ -108,13 +128,17 @@ class Renderer:
         same camera, into one array: the same pixels as a single render would give.
 
         ``tolerance``: an RMSE against the exact image; for ray casting the step is chosen
-        for it (``dvr_gl.rendering.tolerance``), for a mesh (technique tetra) the fastest way
+        for it (``dvr_gl.rendering.tolerance``; on a pyramid, the level and step:
+        ``dvr_gl.rendering.pyramid``), for a mesh (technique tetra) the fastest way
         of rendering it (``dvr_gl.rendering.mesh_tolerance``); what was chosen is ``last_choice``."""
         if tolerance is not None:
             if step is not None:
                 raise ValueError(f"give tolerance or step, not both (got step={step!r}, tolerance={tolerance!r})")
             if scene.is_mesh:
                 scene, technique, step, options = self.mesh_tolerance_settings(scene, tolerance, technique, **options)
+            elif len(getattr(scene.volume, "levels", ()) or ()) > 1 and not scene.layers:   # a pyramid: its level
+                from . import pyramid
+                scene, step, options, self.last_choice = pyramid.settings(self, scene, tolerance, technique, options)
             else:
                 step, chosen = self.tolerance_settings(scene, tolerance, technique, **options)
                 options = dict(options, **chosen)
@@ -122,7 +146,7 @@ class Renderer:
         with current(self.ctx):
             edge = self.max_tile
             if scene.width <= edge and scene.height <= edge:
-                fbo = self._draw(scene, technique, step, options)
+                fbo = self._draw(scene, technique, step, options, read_back=True)
                 return self.read_target(fbo, scene.width, scene.height)
             check_image_memory(scene.width, scene.height)
             image = np.empty((scene.height, scene.width, 4), np.float32)
@@ -139,7 +163,7 @@ class Renderer:
                 x1, y1 = min(x + w + margin, scene.width), min(y + h + margin, scene.height)
                 part = copy.copy(scene)
                 part.tile = (x0, y0, x1 - x0, y1 - y0)
-                fbo = self._draw(part, technique, step, options)
+                fbo = self._draw(part, technique, step, options, read_back=True)
                 pixels = self.read_target(fbo, x1 - x0, y1 - y0)   # row 0 on top: GL row y1 - 1
                 top = y1 - y - h
                 image[scene.height - y - h:scene.height - y, x:x + w] = pixels[top:top + h, x - x0:x - x0 + w]
@@ -156,7 +180,9 @@ class Renderer:
         views and sizes; each view's choice is checked at up to the tolerance module's
         ``CHECK_SIDE`` pixels."""
         from . import tolerance as tol
-        self.last_choice = tol.settings(self, scene, tolerance, technique, options)
+        from .filtering import with_texture_unit
+        choice = tol.settings(self, scene, tolerance, technique, options)
+        self.last_choice = with_texture_unit(self, scene, tolerance, technique, options, choice)
         return self.last_choice.step, dict(self.last_choice.sampling)
 
     def mesh_tolerance_settings(self, scene, tolerance, technique="tetra", **options):
@@ -212,20 +238,32 @@ class Renderer:
         with current(self.ctx):
             return self._draw(scene, technique, step, options)
 
-    def _draw(self, scene, technique, step, options):
+    def _draw(self, scene, technique, step, options, read_back=False):
         if self._released:
             raise RuntimeError("this Renderer has been released")
         tech = get_technique(technique)
         check_options(technique, options)
         plan = tech.make_plan(scene, step, tables=self.tables, **options)
-        return tech.draw(self, plan)
+        # a compute pass may store the image's rows top down when it is read back next
+        # (gpu.draw_ray_compute): read_target then needs no flip
+        self.rows_top_down_wanted, self.top_down_target = read_back, None
+        try:
+            return tech.draw(self, plan)
+        finally:
+            self.rows_top_down_wanted = False
 
     def read_target(self, fbo, width, height):
         """Read back as float32 (GL finishes before this returns), row 0 on top."""
-        data = fbo.read(viewport=(0, 0, width, height), components=4, dtype="f4")
-        return np.frombuffer(data, np.float32).reshape(height, width, 4)[::-1].copy()
+        image = np.empty((height, width, 4), np.float32)     # read straight into NumPy's memory
+        if fbo is self.top_down_target:                      # stored row 0 on top: as it is
+            self.top_down_target = None
+            fbo.read_into(image, viewport=(0, 0, width, height), components=4, dtype="f4")
+            return image
+        fbo.read_into(image, viewport=(0, 0, width, height), components=4, dtype="f4")
+        return np.ascontiguousarray(image[::-1])
 
 
+_COMPUTE_FASTER = {}     # (vendor, renderer, version) -> the stage probe's verdict, per process
 DEFAULT_MAX_TILE = 4096  # a 4096^2 RGBA32F target is 256 MiB
 
 

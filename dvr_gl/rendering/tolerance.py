@@ -21,7 +21,7 @@ whose predicted error is ``SAFETY * E``, between ``MIN_STEP`` and ``MAX_STEP`` v
 pilot is then rendered at that step, its error measured and added to the model, and the
 step chosen again (``verified``), since the error between the pilot's octaves is not
 smooth in the step.
-Unless the caller says ``preintegrate=`` or ``refine=``, further pilots measure
+Unless the caller says ``preintegrate=``, ``refine=`` or ``refine_walk=``, further pilots measure
 pre-integrated segments and, where the TF has detail within reach of the data, refined
 pre-integrated segments (``refine=REFINE_PARTS``): a narrow TF feature needs very short
 plain steps but not pre-integrated ones, and refined ones spend their samples only where
@@ -97,15 +97,19 @@ class Choice:
     pilot_seconds: float
     preintegrate: bool = False
     refine: int = 1
+    refine_walk: str = "even"      # how refined segments are cut (the ray caster's refine_walk)
     frame_seconds: float = None    # the frame time it was picked on, at TIMING_SIDE (None: not timed)
     checked_rmse: float = None     # the check's error bound at this view and step (None: not checked)
     check_size: tuple = None       # the check image's (width, height)
     reused_model: bool = False     # the error model and way came from another view or size
+    interpolation: str = "exact"   # "texture_unit": its quantised weights measured within E (filtering.py)
 
     @property
     def sampling(self):
         """The ray caster's options for this way of sampling."""
-        return {"preintegrate": self.preintegrate, "refine": self.refine}
+        walk = {} if self.refine_walk == "even" else {"refine_walk": self.refine_walk}
+        unit = {} if self.interpolation == "exact" else {"interpolation": self.interpolation}
+        return {"preintegrate": self.preintegrate, "refine": self.refine, **walk, **unit}
 
 
 PLAIN = {"preintegrate": False, "refine": 1}
@@ -433,6 +437,36 @@ def checked(choice, reference, render, scene, tolerance, model, sampled):
                                check_size=(reference.scene.width, reference.scene.height))
 
 
+def pilot_renderer(renderer, technique, options, sampling=PLAIN, **extra):
+    """``render(scene, step)`` with the caller's ``options`` and ``sampling`` (and ``extra``)."""
+    opts = dict(options, **sampling, **extra)
+    return lambda s, h: renderer.render(s, technique, step=h, **opts)
+
+
+def model_key(scene, options, sampling=PLAIN):
+    """What ``settings`` keeps a way's error model under in ``renderer._error_models``."""
+    return ("model",) + family_key(scene, options) + (tuple(sorted(sampling.items())),)
+
+
+def reference_for(renderer, scene, tolerance, technique, options, order, sampling=PLAIN):
+    """The Richardson image of ``scene``'s check view (``check_scene``) with the caller's
+    ``options`` and ``sampling`` and no early termination, made finer while its estimated
+    error is over REFERENCE_SHARE of the check's target for ``tolerance`` (down to
+    FINEST_REFERENCE); kept in ``renderer._error_models`` per check view, volume, TF and
+    options, so ``settings`` and the pyramid's level choice share it."""
+    check = check_scene(scene)
+    pilot = pilot_renderer(renderer, technique, options, sampling, ert_transmittance=0.0)
+    view_key = ("view", check.digest()) + family_key(scene, options)[1:] + (tuple(sorted(sampling.items())),)
+    models = renderer._error_models
+    reference = models.get(view_key, lambda: view_reference(pilot, check, order))
+    # the reference's own error counts against the request: made finer where it is a large share
+    while (reference.error > REFERENCE_SHARE * CHECK_TARGET * tolerance
+           and reference.steps[-1] > FINEST_REFERENCE * (1 + 1e-9)):
+        reference = finer_reference(reference, pilot, order)
+        models.put(view_key, reference)
+    return reference
+
+
 def settings(renderer, scene, tolerance, technique, options):
     """The Choice for ``renderer.render(scene, tolerance=...)``: the error model of each
     way of sampling, measured once per ``family_key`` (on the first view asked) and kept
@@ -446,36 +480,28 @@ def settings(renderer, scene, tolerance, technique, options):
     tolerance = check_tolerance(tolerance)
     options = dict(options)
     fixed = None
-    if "preintegrate" in options or "refine" in options:      # the caller's say is kept
+    if "preintegrate" in options or "refine" in options or "refine_walk" in options:   # the caller's say is kept
         fixed = {"preintegrate": bool(options.pop("preintegrate", False)), "refine": options.pop("refine", 1)}
+        if "refine_walk" in options:
+            fixed["refine_walk"] = options.pop("refine_walk")
     family = family_key(scene, options)
     check = check_scene(scene)
     sampled = (check.width, check.height) != (scene.width, scene.height)
     pilot_digest = pilot_scene(scene).digest()
     models = renderer._error_models
 
-    def render_with(sampling, **extra):
-        # the pilot and the references measure the step's error alone (no early termination)
-        opts = dict(options, **sampling, **extra)
-        return lambda s, h: renderer.render(s, technique, step=h, **opts)
-
     def view_choice(sampling, on_view=True):
-        way = tuple(sorted(sampling.items()))
-        key = ("model",) + family + (way,)
-        pilot = render_with(sampling, ert_transmittance=0.0)
+        key = model_key(scene, options, sampling)
+        # the pilot and the references measure the step's error alone (no early termination)
+        pilot = pilot_renderer(renderer, technique, options, sampling, ert_transmittance=0.0)
         model = models.get(key, lambda: measure(pilot, scene))
         model, chosen = verified(model, pilot, scene, tolerance, sampling)
         models.put(key, model)
         if not on_view:
             return chosen
-        view_key = ("view", check.digest()) + family[1:] + (way,)
-        reference = models.get(view_key, lambda: view_reference(pilot, check, model.order))
-        # the reference's own error counts against the request: made finer where it is a large share
-        while (reference.error > REFERENCE_SHARE * CHECK_TARGET * tolerance
-               and reference.steps[-1] > FINEST_REFERENCE * (1 + 1e-9)):
-            reference = finer_reference(reference, pilot, model.order)
-            models.put(view_key, reference)
-        chosen = checked(chosen, reference, render_with(sampling), scene, tolerance, model, sampled)
+        reference = reference_for(renderer, scene, tolerance, technique, options, model.order, sampling)
+        chosen = checked(chosen, reference, pilot_renderer(renderer, technique, options, sampling), scene,
+                         tolerance, model, sampled)
         return dataclasses.replace(chosen, reused_model=model.pilot is not None and model.pilot.digest() != pilot_digest)
 
     if fixed is not None:

@@ -45,7 +45,7 @@ import numpy as np
 from ..gl.resources import texture3d
 from .common import TARGETS, bind, box_view, cleared_target, grow_pixels, tf_uniforms
 from .gpu import cull_for_proxy, target_fbo, proxy_vao
-from ..model.lazy_volume import brick_summary
+from ..model.lazy_volume import VolumeReadError, brick_summary
 from ..util.memory import BrickCache
 
 OPEN = 3.0e38   # the owned box's bound on the volume's outer faces
@@ -291,7 +291,7 @@ def upload_block(ctx, block, filter_exact):
     offset = 0
     if "BRICK_NORMALIZED" in defines:      # the brick's span fits 16 bits
         offset = int(block.min())
-        tex = texture3d(ctx, (block.astype(np.int64) - offset).astype(np.uint16), 1, name, linear=True)
+        tex = texture3d(ctx, (block.astype(np.int32) - offset).astype(np.uint16), 1, name, linear=True)
     elif defines:     # nearest: an integer texture is incomplete with a linear filter
         tex = texture3d(ctx, block, 1, name, linear=False)
     else:
@@ -349,6 +349,9 @@ def draw(renderer, plan, prog, textures, brick_size):
     camera = scene.camera
     eye = np.asarray(camera.eye, np.float64) - volume.bounds[0]
     drawn = {b.index for b, o in zip(bricks, occupied) if o}
+    subset = getattr(plan, "brick_subset", None)    # a partial image of these bricks only (frontends.distributed)
+    if subset is not None:
+        drawn &= subset
     order = [b for b in visibility_order(bricks, volume, eye, camera.forward, camera.is_ortho) if b.index in drawn]
     width, height = scene.target_size
     running = target_fbo(renderer, width, height, "f4", kind="bricks_running")
@@ -431,9 +434,17 @@ def lazy_occupied(volume, bricks, brick_size, lut, skip_empty):
     return occupied
 
 
+CHUNK_SHARE = 8      # store chunks are cached (not bricks) where one is at most this share of the budget
+
+
 class LazyBrickTextures:
     """A LazyVolume's brick textures for ``draw``: each brick's samples from the
-    BrickCache, one texture on the GPU at a time."""
+    BrickCache, one texture on the GPU at a time. Where the store is chunked and a chunk
+    is at most 1/CHUNK_SHARE of the budget, the cache holds the store's chunks and a
+    brick is put together from them (``LazyVolume.read_chunked``): a brick with its halo
+    meets up to 27 chunks, and neighbouring bricks then share their reads; else it holds
+    the bricks. ``bricks_read`` counts the bricks whose samples were asked for (the
+    cache's ``misses`` and ``bytes_loaded`` count what came from the store)."""
 
     def __init__(self, ctx, volume, filter_exact, cache):
         self.ctx = ctx
@@ -441,10 +452,21 @@ class LazyBrickTextures:
         self.filter_exact = filter_exact
         self.cache = cache
         self.current = None
+        self.bricks_read = 0
+        chunks = getattr(volume, "chunks", None)
+        self.by_chunks = (chunks is not None and hasattr(volume, "read_chunked")
+                          and int(np.prod(chunks)) * volume.dtype.itemsize * CHUNK_SHARE <= cache.budget)
 
     def read(self, brick):
         (z0, z1), (y0, y1), (x0, x1) = brick.samples
-        block = read_block(self.volume, z0, z1, y0, y1, x0, x1)
+        try:
+            if self.by_chunks:
+                block = self.volume.read_chunked(z0, z1, y0, y1, x0, x1, self.cache)
+            else:
+                block = read_block(self.volume, z0, z1, y0, y1, x0, x1)
+        except VolumeReadError as e:
+            e.brick = brick     # whose read failed (its block may be one chunk of it); frontends.distributed names it
+            raise
         if block.dtype.kind == "f" and not np.isfinite(block).all():
             raise ValueError(f"bricked ray casting does not yet take non-finite samples: brick {brick.index} "
                              f"(samples z {z0}:{z1}, y {y0}:{y1}, x {x0}:{x1}) of {self.volume.describe()} has some")
@@ -453,8 +475,12 @@ class LazyBrickTextures:
     def get(self, brick):
         """(texture, offset) of ``brick``, as BrickTextures.get; the previous one is released."""
         self.release()
-        key = tuple(v for pair in brick.samples for v in pair)
-        block = self.cache.get(self.volume, key, lambda: self.read(brick))
+        self.bricks_read += 1
+        if self.by_chunks:
+            block = self.read(brick)
+        else:
+            key = tuple(v for pair in brick.samples for v in pair)
+            block = self.cache.get(self.volume, key, lambda: self.read(brick))
         self.current = upload_block(self.ctx, block, self.filter_exact)
         return self.current
 

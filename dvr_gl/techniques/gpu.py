@@ -84,6 +84,40 @@ def preintegration_texture(renderer, table, fine=None):
     return store.get("preintegration", IdentityKey(table, fine), make, capacity=2)
 
 
+STAGES = ("auto", "fragment", "compute")
+IMAGE_FORMATS = {"rgba32f": "rgba32f", "rgba16f": "rgba16f", "rgba8": "rgba8"}   # target -> GLSL image format
+
+
+def check_stage(stage):
+    """``stage``: where a per-pixel ray shader runs, one of STAGES."""
+    if stage not in STAGES:
+        raise ValueError(f"stage must be one of {', '.join(STAGES)}, got {stage!r}")
+
+
+INTERPOLATIONS = ("exact", "texture_unit")
+
+
+def check_interpolation(interpolation, bricked):
+    """``interpolation``: one of INTERPOLATIONS; "texture_unit" is for one texture."""
+    if interpolation not in INTERPOLATIONS:
+        raise ValueError(f"interpolation must be one of {', '.join(INTERPOLATIONS)}, got {interpolation!r}")
+    if interpolation == "texture_unit" and bricked:
+        raise ValueError("interpolation 'texture_unit' does not yet take bricks (brick_size, or a LazyVolume)")
+
+
+def pixel_stage(renderer, stage):
+    """"fragment" or "compute" for a per-pixel ray shader with the option ``stage``: "auto"
+    takes the one the renderer measured faster on its GPU (``Renderer.compute_stage_faster``:
+    llvmpipe runs fragment shaders faster; GPUs whose graphics pipeline reaches only some
+    of their cores run compute shaders far faster); "compute" needs GL 4.3."""
+    if stage == "auto":
+        return "compute" if renderer.compute_stage_faster else "fragment"
+    if stage == "compute" and renderer.ctx.version_code < 430:
+        raise ValueError(f"stage 'compute' needs OpenGL 4.3; this context has "
+                         f"{renderer.ctx.version_code // 100}.{renderer.ctx.version_code % 100 // 10}")
+    return stage
+
+
 def target_fbo(renderer, width, height, dtype, kind="target", components=4):
     """A framebuffer with one texture of ``components`` channels of ``dtype`` (RGBA for
     images), kept per size and ``kind`` (the image's own, or a technique's auxiliary
@@ -92,6 +126,25 @@ def target_fbo(renderer, width, height, dtype, kind="target", components=4):
     return store.get("target", (kind, width, height, dtype, components), lambda: store.made(
         kind, (height, width, dtype), Target(renderer.ctx, width, height, dtype, components, store.idle)),
         capacity=6).fbo
+
+
+def draw_ray_compute(renderer, prog, scene, dtype):
+    """Run the compute build of a per-pixel ray shader (``ProgramCache.compute``) once per
+    pixel of the renderer's target for this size and ``dtype`` (f4, f2, f1), which it writes whole;
+    returns the framebuffer. Rows are stored top down where the renderer reads the image
+    back next (``Renderer.read_target`` then copies no rows: a 1024x1024 float image's
+    flip cost more than its ray casting on a GPU)."""
+    ctx = renderer.ctx
+    width, height = scene.target_size
+    fbo = target_fbo(renderer, width, height, dtype)
+    fbo.color_attachments[0].bind_to_image(0, read=False, write=True)
+    prog["u_target_size"].value = (width, height)
+    top_down = getattr(renderer, "rows_top_down_wanted", False)     # (Renderer._draw: read back next)
+    prog["u_rows_top_down"].value = int(top_down)
+    renderer.top_down_target = fbo if top_down else None
+    prog.run((width + 7) // 8, (height + 7) // 8)
+    ctx.memory_barrier()
+    return fbo
 
 
 def proxy_vao(renderer, prog, kind):
@@ -148,3 +201,32 @@ def cull_for_proxy(ctx, kind):
         ctx.cull_face = "front"
     else:
         ctx.disable(ctx.CULL_FACE)
+
+
+def table_texture(ctx, rows):
+    """An (n, 4) float32 table as an (n, 1) RGBA32F texture read with texelFetch."""
+    tex = ctx.texture((len(rows), 1), 4, np.ascontiguousarray(rows, np.float32).tobytes(), dtype="f4")
+    tex.filter = (ctx.NEAREST, ctx.NEAREST)
+    return tex
+
+
+def occupancy_texture(renderer, volume, tf, occupancy):
+    """The bricks' occupancy for the volume and its TF (``brick_occupancy``) as a
+    nearest-filtered 3-D texture, 255 where occupied; kept for the 4 most recent pairs."""
+    store = renderer.resources
+
+    def make():
+        mask = occupancy.astype(np.uint8) * 255
+        return store.made("occupancy", mask.shape, texture3d(renderer.ctx, mask, 1, "f1", linear=False))
+    return store.get("occupancy", IdentityKey(volume, tf), make, capacity=4)
+
+
+def jitter_texture(renderer, table):
+    """The jitter offsets (a 2-D float32 table) as a texture, made again only for new values."""
+    store = renderer.resources
+
+    def make():
+        tex = renderer.ctx.texture((table.shape[1], table.shape[0]), 1, table.astype("f4").tobytes(), dtype="f4")
+        tex.filter = (renderer.ctx.NEAREST, renderer.ctx.NEAREST)
+        return store.made("jitter", table.shape, tex)
+    return store.get("jitter", (table.shape, table.tobytes()), make, capacity=None)

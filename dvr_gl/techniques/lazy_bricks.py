@@ -12,8 +12,11 @@ something is skipped.
 
 The bricks that are drawn are read through a :class:`dvr_gl.util.memory.BrickCache`
 bounded by ``memory`` (bytes, or a size such as ``"2GB"``; default a quarter of the
-memory available when first asked, ``DEFAULT_MEMORY_FRACTION``); one brick's texture is
-held on the GPU at a time, released before the next is uploaded. A budget smaller than one brick is a
+memory available when first asked, ``DEFAULT_MEMORY_FRACTION``): where the store is
+chunked (and a chunk is small beside the budget) the cache holds its chunks and a brick
+is put together from them, so neighbouring bricks, whose halos meet the same chunks,
+read each chunk once; one brick's texture is held on the GPU at a time, released
+before the next is uploaded. A budget smaller than one brick is a
 ``BudgetError`` before anything is read. Samples are taken as finite (a LazyVolume
 cannot say otherwise without reading it all): a brick read with non-finite samples is a
 ValueError naming the brick.

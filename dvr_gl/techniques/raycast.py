@@ -67,6 +67,10 @@ refine : 1 (default) or an integer from 2 to 64, with ``preintegrate=True``: ada
     the field is one smooth cubic, so the straight line errs at second order), each part
     sampled, read from a second table made for its length and lit at its own midpoint:
     the extra samples go only where a narrow feature may be crossed.
+refine_walk : "even" (default): a refined segment's parts as above; "reach": each part is
+    as long as the field cannot reach the TF's detail from its front (value distance /
+    G), at least 1/``refine`` of the segment, and cut at cell faces only where shorter
+    (``shaders/common/reach_walk.glsl``): short parts only where detail can be crossed.
 step_table : True (default): a full-length segment (all but a ray's first and last) reads
     its premultiplied, opacity-corrected segment from a table made once per TF and step
     (``LookupTable.step_table``) instead of correcting each sample's opacity (a log and an
@@ -86,6 +90,12 @@ brick_size : None (default) or a whole number N: draw the volume in bricks of N 
     isosurfaces, pre-integration, geometry, gradient textures or masked samples (named errors).
     A LazyVolume (a store) is always drawn in bricks, of its summary's size by default,
     empty bricks known from the summary and never read (``techniques.lazy_bricks``).
+stage : "auto" (default) | "fragment" | "compute": where the per-pixel shader runs
+    (``gpu.pixel_stage``; auto: what the renderer measured faster on its GPU).
+interpolation : "exact" (default) | "texture_unit": where the texture unit's linear filter
+    quantises its weights (GPUs), "exact" interpolates eight fetches in the shader;
+    "texture_unit" takes the unit's filter anyway (1.1x to 2.6x faster on a GPU, its error
+    measured by ``tolerance=``, which takes it where it stays within the request).
 memory : a LazyVolume's budget for brick samples held at once, bytes or a size such as
     "2GB" (default: a quarter of the memory available); smaller than one brick: an error.
 
@@ -108,11 +118,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..util.cache import IdentityKey, TableCache
+from ..util.cache import TableCache
 from ..gl.resources import texture3d
 from ..model.scene import Scene
 from ..model.transfer import LookupTable
-from .common import (add_optional_inputs, draw_ray_proxy, bind, box_proxy, box_view, camera_uniforms, check_flag,
+from .common import (TARGETS, add_optional_inputs, draw_ray_proxy, bind, box_proxy, box_view, camera_uniforms, check_flag,
                      check_scene, clip_defines, clip_uniforms, grow_pixels, shading_defines,
                      check_step, check_target, preintegration_applies, preintegration_table, tf_uniforms, volume_uniforms)
 from .geometry import surface_pass
@@ -120,10 +130,12 @@ from . import raycast_layers
 from .bricks import (brick_occupancy, brick_size_for, bricked_defines, check_bricking, draw as draw_bricked,
                      halo_for, unsupported)
 from .lazy_bricks import plan_lazy
-from .gpu import target_fbo, tf_texture, volume_texture
+from .gpu import (IMAGE_FORMATS, check_interpolation, check_stage, draw_ray_compute, jitter_texture, occupancy_texture,
+                  pixel_stage, table_texture, target_fbo, tf_texture, volume_texture)
 
 BRICK = 8            # brick edge in cells, for empty-space skipping
 MAX_REFINE = 64
+REFINE_WALKS = ("even", "reach")   # how a refined segment is cut (refine_walk)
 MAX_REACH_BOUNDS = 1 << 24   # gradient bounds per volume at most (float32: 64 MB)
 JITTER_TABLE = 64    # jitter table edge in pixels
 
@@ -152,6 +164,7 @@ class RaycastPlan:
     step_rows: np.ndarray | None = None    # LookupTable.step_table for this step, or None
     brick_size: int | None = None          # cells per brick side (bricks.py), None: as the volume needs
     lazy: object = None                    # a LazyVolume's lazy_bricks.LazyBricking, else None
+    stage: str = "auto"                    # where the per-pixel shader runs (gpu.pixel_stage)
 
     @property
     def max_segments(self):
@@ -166,13 +179,20 @@ def default_step(volume):
 
 def make_plan(scene, step=None, *, target="rgba32f", jitter_seed=None, ert_transmittance=1e-3,
               skip_empty=True, preintegrate=False, refine=1, gradients="on_the_fly", step_table=True,
-              brick_size=None, memory=None, tables=None):
+              brick_size=None, memory=None, stage="auto", interpolation="exact", refine_walk="even",
+              tables=None):
     """Validate the options and decide what the scene needs. ``tables`` (a
     ``dvr_gl.util.cache.TableCache``) keeps the TF's lookup table and the volume's brick
     ranges between frames."""
     if isinstance(scene, Scene) and scene.layers:   # several volumes: raycast_layers plans them (same options)
         check_bricking(scene, brick_size, preintegrate, gradients)    # (not bricked yet: a named error)
-        return raycast_layers.make_plan(**{k: v for k, v in locals().items() if k not in ("brick_size", "memory")})
+        for name, value, only in (("stage", stage, ("auto", "fragment")), ("interpolation", interpolation, ("exact",)),
+                                  ("refine_walk", refine_walk, ("even",))):
+            if value not in only:
+                raise ValueError(f"several volumes (Scene.layers) do not yet take {name}={value!r}")
+        return raycast_layers.make_plan(**{k: v for k, v in locals().items()
+                                           if k not in ("brick_size", "memory", "stage", "interpolation", "refine_walk",
+                                                        "name", "value", "only")})
     tables = tables or TableCache()
     check_scene(scene, "raycast")
     step = default_step(scene.volume) if step is None else check_step(step, scene.volume)
@@ -184,6 +204,8 @@ def make_plan(scene, step=None, *, target="rgba32f", jitter_seed=None, ert_trans
     if not 0 <= ert_transmittance < 1:
         raise ValueError(f"ert_transmittance must be in [0, 1), got {ert_transmittance!r}")
     check_flag("skip_empty", skip_empty)
+    check_stage(stage)
+    check_interpolation(interpolation, brick_size or scene.is_lazy)
     brick_size = check_bricking(scene, brick_size, preintegrate, gradients)
     lazy = None
     if scene.is_lazy:      # always bricked, emptiness from the summary (lazy_bricks)
@@ -199,6 +221,8 @@ def make_plan(scene, step=None, *, target="rgba32f", jitter_seed=None, ert_trans
         raise TypeError(f"refine must be an integer (parts per refined segment), got {refine!r}")
     if not 1 <= refine <= MAX_REFINE:
         raise ValueError(f"refine must be from 1 to {MAX_REFINE}, got {refine!r}")
+    if refine_walk not in REFINE_WALKS:
+        raise ValueError(f"refine_walk must be one of {', '.join(REFINE_WALKS)}, got {refine_walk!r}")
     if refine > 1 and not preintegrate:
         raise ValueError(f"refine splits pre-integrated segments; give preintegrate=True (got refine={refine})")
     composite = scene.mode == "composite"
@@ -247,12 +271,15 @@ def make_plan(scene, step=None, *, target="rgba32f", jitter_seed=None, ert_trans
             defines["SKIP_EMPTY"] = 1
         if refine > 1:
             defines["REFINE"] = 1
+            defines["REACH_WALK"] = int(refine_walk == "reach")
             # a compile-time count: a uniform one cost the spike's frame 10 % (docs/notes/raycast.md)
             defines["DETAIL_COUNT"] = max(len(detail), 1)
     defines.update(shading_defines(scene, gradients))
     defines.update(clip_defines(scene))
     if scene.geometry:
         defines["GEOMETRY"] = 1
+    if interpolation == "texture_unit":
+        defines["TEXTURE_FILTER_EXACT"] = 1      # every filtered read from the texture unit
     step_rows = None
     if check_flag("step_table", step_table) and uses_step_table(scene, preint):
         step_rows = tables.get("step_table", lut, step / scene.tf.unit_distance,
@@ -261,7 +288,7 @@ def make_plan(scene, step=None, *, target="rgba32f", jitter_seed=None, ert_trans
     return RaycastPlan(scene=scene, step=step, lut=lut, target=target, jitter=jitter,
                        ert_transmittance=ert, occupancy=occupancy, preint=preint, defines=defines,
                        step_rows=step_rows, refine=int(refine), preint_fine=fine, bricks=bricks, detail=detail,
-                       reach=reach, reach_block=block, brick_size=brick_size, lazy=lazy)
+                       reach=reach, reach_block=block, brick_size=brick_size, lazy=lazy, stage=stage)
 
 
 def uses_step_table(scene, preint):
@@ -517,8 +544,12 @@ def draw(renderer, plan):
     surfaces = surface_pass(renderer, scene) if scene.geometry else None   # each pixel's first surface
     defines = dict(plan.defines, OCCUPIED_RANGE=1) if occupied is not None else plan.defines
     brick_size = brick_size_for(renderer, plan)     # None: the volume in one texture
-    prog = renderer.programs.get("raycast/raycast.vert", "raycast/raycast.frag",
-                                 dict(defines, **bricked_defines(renderer, volume)) if brick_size else defines)
+    compute = not brick_size and pixel_stage(renderer, plan.stage) == "compute"
+    if compute:
+        prog = renderer.programs.compute("raycast/raycast.frag", dict(defines, IMAGE_FORMAT=IMAGE_FORMATS[plan.target]))
+    else:
+        prog = renderer.programs.get("raycast/raycast.vert", "raycast/raycast.frag",
+                                     dict(defines, **bricked_defines(renderer, volume)) if brick_size else defines)
     textures = {} if brick_size else {"t_volume": volume_texture(renderer, volume)}
     textures["t_tf"] = tf_texture(renderer, plan.lut)
     if occupied is not None:
@@ -530,7 +561,7 @@ def draw(renderer, plan):
     if plan.occupancy is not None:
         textures["t_occupancy"] = occupancy_texture(renderer, volume, scene.tf, plan.occupancy)
     if plan.step_rows is not None:
-        textures["t_step_tf"] = renderer.resources.for_objects("step_tf", plan.step_rows, make=lambda: _table_texture(
+        textures["t_step_tf"] = renderer.resources.for_objects("step_tf", plan.step_rows, make=lambda: table_texture(
             renderer.ctx, plan.step_rows))
     uniforms = {**camera_uniforms(scene), **volume_uniforms(volume), **tf_uniforms(plan.lut, scene.tf),
                 **clip_uniforms(scene), "u_step": plan.step, "u_max_segments": plan.max_segments}
@@ -562,34 +593,7 @@ def draw(renderer, plan):
         prog["u_detail"].write(detail.tobytes())
     if brick_size:
         return draw_bricked(renderer, plan, prog, textures, brick_size)
+    if compute:
+        return draw_ray_compute(renderer, prog, scene, TARGETS[plan.target])
     kind, view_proj = box_proxy(scene, grow_pixels=grow_pixels(renderer.ctx))
     return draw_ray_proxy(renderer, prog, scene, plan.target, kind, view_proj, surfaces)
-
-
-def _table_texture(ctx, rows):
-    """An (n, 4) float32 table as an (n, 1) RGBA32F texture read with texelFetch."""
-    tex = ctx.texture((len(rows), 1), 4, np.ascontiguousarray(rows, np.float32).tobytes(), dtype="f4")
-    tex.filter = (ctx.NEAREST, ctx.NEAREST)
-    return tex
-
-
-def occupancy_texture(renderer, volume, tf, occupancy):
-    """The bricks' occupancy for the volume and its TF (``brick_occupancy``) as a
-    nearest-filtered 3-D texture, 255 where occupied; kept for the 4 most recent pairs."""
-    store = renderer.resources
-
-    def make():
-        mask = occupancy.astype(np.uint8) * 255
-        return store.made("occupancy", mask.shape, texture3d(renderer.ctx, mask, 1, "f1", linear=False))
-    return store.get("occupancy", IdentityKey(volume, tf), make, capacity=4)
-
-
-def jitter_texture(renderer, table):
-    """The jitter offsets (a 2-D float32 table) as a texture, made again only for new values."""
-    store = renderer.resources
-
-    def make():
-        tex = renderer.ctx.texture((table.shape[1], table.shape[0]), 1, table.astype("f4").tobytes(), dtype="f4")
-        tex.filter = (renderer.ctx.NEAREST, renderer.ctx.NEAREST)
-        return store.made("jitter", table.shape, tex)
-    return store.get("jitter", (table.shape, table.tobytes()), make, capacity=None)

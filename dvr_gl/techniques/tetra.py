@@ -73,7 +73,7 @@ from .common import (sample_term_uniforms, cleared_target, RepeatedIndices, Size
                      check_scene, check_target, clip_defines, clip_uniforms, data_projection, grow_pixels,
                      knot_uniforms)
 from .geometry import draw_surface_behind, surface_pass
-from .gpu import empty_vao
+from .gpu import check_stage, empty_vao
 
 MODES = ("composite", "mip", "minip", "average")
 TAKES_STEP = False
@@ -98,6 +98,7 @@ class TetraPlan:
     walk_passes: int = 0           # sort="walk": layers of depth peeling in the last draw
     walk_left: int = 0             # sort="walk": pixels with an entry left at the pass cap
     walk_state: object = None      # sort="walk": the last draw's per-pixel state texture
+    stage: str = "auto"            # sort="walk": where the walk pass runs (gpu.pixel_stage)
 
 
 def reaches_behind_eye(scene, cells):
@@ -149,7 +150,7 @@ def _drop_clipped(scene, cells, tables):
     return cells[keep[cells]]
 
 
-def make_plan(scene, step=None, *, sort="mpvo", target="rgba32f", tables=None):
+def make_plan(scene, step=None, *, sort="mpvo", target="rgba32f", stage="auto", tables=None):
     """Validate the options and decide what the scene needs. ``tables`` keeps the
     visible cells (per TF) and the order (per view) between frames."""
     tables = tables or TableCache()
@@ -159,6 +160,7 @@ def make_plan(scene, step=None, *, sort="mpvo", target="rgba32f", tables=None):
     if sort not in SORTS:
         raise ValueError(f"sort must be one of {', '.join(SORTS)}, got {sort!r}")
     check_target(target)
+    check_stage(stage)
     mesh, tf = scene.volume, scene.tf
     if sort == "walk":
         from . import tetra_walk
@@ -176,7 +178,8 @@ def make_plan(scene, step=None, *, sort="mpvo", target="rgba32f", tables=None):
         if scene.camera.is_ortho:
             defines["ORTHO"] = 1
         return TetraPlan(scene=scene, knots=knots, visible=cells, order=Order(cells, 0, 0), draw=cells,
-                         sort=sort, target=target, defines=defines, behind_eye=reaches_behind_eye(scene, cells))
+                         sort=sort, target=target, defines=defines, behind_eye=reaches_behind_eye(scene, cells),
+                         stage=stage)
     visible = tables.get("visible_cells", mesh, tf, make=visible_cells)
     timing = {}
 
@@ -211,7 +214,7 @@ def make_plan(scene, step=None, *, sort="mpvo", target="rgba32f", tables=None):
                 defines["LIGHTS"] = 1
     return TetraPlan(scene=scene, knots=knots, visible=visible, order=result, draw=draw, sort=sort,
                      target=target, defines=defines, sort_seconds=timing.get("sort", 0.0),
-                     behind_eye=None if sort == "walk" else reaches_behind_eye(scene, draw))
+                     behind_eye=None if sort == "walk" else reaches_behind_eye(scene, draw), stage=stage)
 
 
 def knot_capacity(count):

@@ -59,7 +59,7 @@ from ..model.mesh import topology
 from .common import (bind, camera_uniforms, clip_uniforms, data_projection, grow_pixels, knot_uniforms,
                      sample_term_uniforms)
 from .geometry import draw_surface_behind, surface_pass
-from .gpu import empty_vao
+from .gpu import empty_vao, pixel_stage
 
 MAX_PASSES = 64            # layers of depth peeling (entries along one ray) at most
 HIDDEN_FRACTION = 0.5      # walk only the cells the TF shows where it hides this share (walked_cells)
@@ -256,7 +256,9 @@ def draw(renderer, plan, data, texture):
     view = {"ORTHO": 1} if scene.camera.is_ortho else {}
     entry_prog = renderer.programs.get("tetra/walk_entry.vert", "tetra/walk_entry.frag", view,
                                        geometry="tetra/walk_entry.geom")
-    walk_prog = renderer.programs.get("tetra/fullscreen.vert", "tetra/walk.frag", plan.defines)
+    compute = pixel_stage(renderer, plan.stage) == "compute"
+    walk_prog = (renderer.programs.compute("tetra/walk.frag", plan.defines) if compute else
+                 renderer.programs.get("tetra/fullscreen.vert", "tetra/walk.frag", plan.defines))
     view_proj = data_projection(scene, near=None if scene.camera.is_ortho else
                                 1e-6 * float(np.linalg.norm(mesh.extent))).astype("f4").tobytes()
     cam = camera_uniforms(scene)
@@ -301,7 +303,14 @@ def draw(renderer, plan, data, texture):
         if surfaces is not None:
             textures["t_surface"] = surfaces
         bind(walk_prog, textures, {**walk_uniforms, "u_start_cell": start if first_from_eye else -1})
-        empty_vao(renderer, walk_prog).render(ctx.TRIANGLES, vertices=3)
+        if compute:
+            targets.acc[dst].bind_to_image(0, read=False, write=True)
+            targets.state[dst].bind_to_image(1, read=False, write=True)
+            walk_prog["u_target_size"].value = (width, height)
+            walk_prog.run((width + 7) // 8, (height + 7) // 8)
+            ctx.memory_barrier()
+        else:
+            empty_vao(renderer, walk_prog).render(ctx.TRIANGLES, vertices=3)
         src = dst
         plan.walk_passes += 1
     ctx.disable(ctx.BLEND)

@@ -3,6 +3,7 @@
 // ray's sums from the image of the bricks before it.
 #ifndef DVR_BRICKS_GLSL
 #define DVR_BRICKS_GLSL
+#include "common/pixel_stage.glsl"
 
 #ifndef BRICKED
 #define BRICKED 0
@@ -22,7 +23,7 @@ bool ownedSample(vec3 p) {
 }
 
 vec4 accumulatedSoFar() {
-    return texelFetch(t_accum, ivec2(gl_FragCoord.xy), 0);
+    return texelFetch(t_accum, ivec2(FRAG_COORD.xy), 0);
 }
 
 // Segment indices [k_lo, k_hi] (either convention: k's midpoint at t0 + (jitter + k + 0.5)

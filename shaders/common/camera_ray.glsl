@@ -2,9 +2,10 @@
 // with positions relative to the volume box's lower corner.
 //
 // pixelCoord: this fragment's pixel centre in the whole image (GL window coordinates);
-// with tiles, gl_FragCoord is relative to the tile.
+// with tiles, FRAG_COORD (gl_FragCoord) is relative to the tile.
 #ifndef DVR_CAMERA_RAY_GLSL
 #define DVR_CAMERA_RAY_GLSL
+#include "common/pixel_stage.glsl"
 
 #ifndef ORTHO
 #define ORTHO 0
@@ -25,14 +26,14 @@ uniform vec2 u_screen;        // half extent of the view: at unit distance, or w
 // Perspective rays start at the eye; orthographic ones on the plane through the eye
 // normal to the view. `dir` is a unit vector.
 vec2 pixelCoord() {
-    return gl_FragCoord.xy + u_tile_origin;
+    return FRAG_COORD.xy + u_tile_origin;
 }
 
 void pixelRay(out vec3 origin, out vec3 dir) {
     // (2 c - n) / n: the numerator is exact (pixel centres are half-integers), so the
     // middle row or column of an odd-sized image gets ndc exactly 0, as the NumPy twin's;
     // c * (2 / n) - 1 left it 1e-7 off, and a ray meant to lie in a face plane missed it
-    PRECISE vec2 ndc = (2.0 * (gl_FragCoord.xy + u_tile_origin) - u_viewport) / u_viewport;
+    PRECISE vec2 ndc = (2.0 * (FRAG_COORD.xy + u_tile_origin) - u_viewport) / u_viewport;
     PRECISE vec3 offset = (ndc.x * u_screen.x) * u_right + (ndc.y * u_screen.y) * u_up;
 #if ORTHO
     PRECISE vec3 start = u_eye + offset;

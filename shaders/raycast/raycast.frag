@@ -106,6 +106,7 @@ bool touchesDetail(float lo, float hi) {
     }
     return touches;
 }
+#include "common/reach_walk.glsl"
 #endif
 #if EARLY_RAY_TERMINATION
 uniform float u_ert_transmittance;
@@ -118,7 +119,11 @@ uniform sampler2D t_surface;  // per pixel: the first surface's lit colour and i
 uniform float u_iso;
 #endif
 
+#if COMPUTE_PIXELS
+vec4 f_color;                 // stored by common/pixel_store.glsl's main()
+#else
 out vec4 f_color;
+#endif
 
 #ifndef OCCUPIED_RANGE
 #define OCCUPIED_RANGE 0   // segments start and stop where the ray meets occupied bricks
@@ -211,7 +216,7 @@ void compositePartial(vec3 origin, vec3 dir, float a, float b, inout vec3 color,
 }
 #endif
 
-void main() {
+void PIXEL_MAIN() {
     vec3 origin, dir;
     pixelRay(origin, dir);
     PRECISE vec2 range = clipRange(origin, dir, intersectBox(origin, dir, vec3(0.0), u_extent));
@@ -222,7 +227,7 @@ void main() {
 #endif
 #if GEOMETRY
     // the ray ends at its first surface, which is composited behind what it gathered
-    vec4 surface = texelFetch(t_surface, ivec2(gl_FragCoord.xy), 0);
+    vec4 surface = texelFetch(t_surface, ivec2(FRAG_COORD.xy), 0);
     bool on_surface = surface.a < 1e38;
     range.y = min(range.y, surface.a);
     if (range.y <= range.x) {
@@ -280,7 +285,7 @@ void main() {
     // Every segment wholly outside [t_enter, t_leave] lies in empty bricks and is exactly
     // zero; the loops below start and stop one segment beyond (t_leave < t_enter where
     // the ray meets no occupied brick).
-    vec2 occupied = texelFetch(t_occupied_range, ivec2(gl_FragCoord.xy), 0).rg;
+    vec2 occupied = texelFetch(t_occupied_range, ivec2(FRAG_COORD.xy), 0).rg;
     float t_enter = occupied.x;
     float t_leave = -occupied.y;
 #endif
@@ -384,6 +389,7 @@ void main() {
     bool walking = false;           // inside a refined segment [a_walk, b_walk]
     float a_walk = 0.0, b_walk = 0.0, part = 0.0;
     int even = 1;
+    float g_walk = 0.0;             // the walked segment's gradient bound (REACH_WALK)
     vec3 t_face = vec3(0.0);        // the walk's next cell face along each axis
     vec3 inv_dir = 1.0 / dir;
     vec3 t_cell = mix(u_spacing * abs(inv_dir), vec3(0.0), equal(dir, vec3(0.0)));
@@ -394,7 +400,11 @@ void main() {
         float t_next;
         float t_even = even < u_refine ? a_walk + float(even) * part : b_walk;   // (walking)
         if (walking) {
+    #if REACH_WALK
+            t_next = reachPieceEnd(origin, dir, inv_dir, t_prev, s_front, g_walk, part, b_walk);
+    #else
             t_next = min(min(t_even, min(t_face.x, min(t_face.y, t_face.z))), b_walk);
+    #endif
         } else {
             if (k > k_last || k >= u_max_segments) break;
             float a = max(t0 + (jitter + float(k)) * u_step, t0);
@@ -428,9 +438,11 @@ void main() {
             // the parts' length.
             float mid = 0.5 * (s_front + s_next);
             ivec3 block = clamp(ivec3(floor(p / u_spacing / u_reach_block)), ivec3(0), textureSize(t_reach, 0) - 1);
-            float reach = 0.5 * max(texelFetch(t_reach, block, 0).r * len, abs(s_next - s_front));
+            float g_here = texelFetch(t_reach, block, 0).r;
+            float reach = 0.5 * max(g_here * len, abs(s_next - s_front));
             if (touchesDetail(mid - reach, mid + reach)) {
                 walking = true;
+                g_walk = g_here;
                 a_walk = t_prev;
                 b_walk = t_next;
                 part = len / float(u_refine);
@@ -621,3 +633,5 @@ void main() {
     if (on_surface) f_color = vec4(f_color.rgb + (1.0 - f_color.a) * surface.rgb, 1.0);
 #endif
 }
+
+#include "common/pixel_store.glsl"

@@ -62,8 +62,13 @@ uniform int u_max_steps;
 uniform sampler2D t_surface;      // the first surface's lit colour and t (3e38: none)
 #endif
 
+#if COMPUTE_PIXELS
+vec4 frag_acc;                    // stored by main() at the end
+vec4 frag_state;
+#else
 layout(location = 0) out vec4 frag_acc;
 layout(location = 1) out vec4 frag_state;
+#endif
 
 const float ERT_ALPHA = 1.0 - 1.0 / 1048576.0;   // the rest of the ray adds at most 2^-20
 const float DONE = 3.0e38;
@@ -134,8 +139,8 @@ int flatExit(int cell, vec3 x, vec3 dir, ivec4 nb, int prev) {
     return pick;
 }
 
-void main() {
-    ivec2 px = ivec2(gl_FragCoord.xy);
+void PIXEL_MAIN() {
+    ivec2 px = ivec2(FRAG_COORD.xy);
     vec4 acc = texelFetch(t_acc, px, 0);
     vec4 state = texelFetch(t_state, px, 0);
     frag_acc = acc;
@@ -284,3 +289,19 @@ void main() {
         frag_state = vec4(t_cur, t_cur == entry_t ? float(entry_cell) : -1.0, walked, state.w);
     }
 }
+
+#if COMPUTE_PIXELS
+// the compute stage (common/pixel_stage.glsl): one invocation per pixel, both outputs stored
+layout(local_size_x = 8, local_size_y = 8) in;
+layout(rgba32f, binding = 0) uniform writeonly image2D u_acc_out;
+layout(rgba32f, binding = 1) uniform writeonly image2D u_state_out;
+uniform ivec2 u_target_size;
+
+void main() {
+    ivec2 px = ivec2(gl_GlobalInvocationID.xy);
+    if (any(greaterThanEqual(px, u_target_size))) return;
+    PIXEL_MAIN();
+    imageStore(u_acc_out, px, frag_acc);
+    imageStore(u_state_out, px, frag_state);
+}
+#endif

@@ -72,7 +72,8 @@ def _run(args):
     glfw = viewer.glfw
     try:
         v = settings.volume
-        what = (describe_data(v) if is_mesh(v) else f"{describe_data(v)} (x, y, z) {v.data.dtype}")
+        what = (describe_data(v) if is_mesh(v) else
+                f"{describe_data(v)} (x, y, z) {getattr(v, 'dtype', None) or v.data.dtype}")
         print(f"{PROG}: {settings.input_name}: {what}, values "
               f"{v.data_range[0]:g}..{v.data_range[1]:g}; transfer function {settings.tf_name}; "
               f"techniques {', '.join(viewer.available_techniques)}", flush=True)

@@ -49,6 +49,8 @@ def data_values(volume):
     :class:`~dvr_gl.TetMesh`'s point scalars (always finite)."""
     if isinstance(volume, TetMesh):
         return volume.scalars
+    if not hasattr(volume, "data"):       # a LazyVolume: its samples are not all read for a histogram
+        return np.zeros(0)
     return volume.data[np.isfinite(volume.data)] if volume.has_nonfinite else volume.data
 
 
