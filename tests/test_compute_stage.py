@@ -53,7 +53,7 @@ OPTIONS = [{}, dict(jitter_seed=5), dict(skip_empty=False, ert_transmittance=0.0
 
 
 @pytest.mark.parametrize("opts", OPTIONS, ids=lambda o: ",".join(f"{k}={v}" for k, v in o.items()) or "defaults")
-def test_compute_and_fragment_stages_agree(renderer, opts):
+def test_compute_and_fragment_stages_agree(ctx, renderer, opts):
     """Skipping, early termination, jitter, pre-integration with refinement, low-precision
     targets, clipping and shading: the same image from both stages (bit for bit on
     llvmpipe; elsewhere each is within the twin's bound, so within twice it of the other)."""
@@ -71,7 +71,7 @@ def test_compute_and_fragment_stages_agree(renderer, opts):
             assert np.abs(a - b).max() <= 2 * derived_tolerance(plan) + (2 / 255 if opts.get("target") else 0)
 
 
-def test_compute_stage_in_tiles_is_the_whole_image(renderer):
+def test_compute_stage_in_tiles_is_the_whole_image(ctx, renderer):
     """Tiles (a window of the camera per target) give the one-target image in the compute stage."""
     needs_compute(renderer)
     scene = Scene(VOLUME, TF, cameras(VOLUME)["ortho"], width=45, height=38)
@@ -86,7 +86,7 @@ def test_compute_stage_in_tiles_is_the_whole_image(renderer):
 
 @pytest.mark.parametrize("split", ["five", "six"])
 @pytest.mark.parametrize("view", ["body_diagonal", "eye_inside"])
-def test_compute_walk_is_the_constant_box(renderer, split, view):
+def test_compute_walk_is_the_constant_box(ctx, renderer, split, view):
     """The cell walk in the compute stage through shared faces, edges and vertices: the
     constant cube's closed form within tetra's GL_TOL (test_tetra_walk's first case)."""
     needs_compute(renderer)
@@ -109,12 +109,14 @@ def test_compute_walk_on_the_ball_matches_the_twin(renderer):
     assert img[..., 3].max() > 0.1 and np.abs(img - ref).max() < GL_TOL
 
 
-def test_stage_probe_and_choice(renderer, monkeypatch):
+def test_stage_probe_and_choice(ctx, renderer, monkeypatch):
     """The probe times both stages; llvmpipe runs fragment shaders at least as fast, so
     "auto" keeps the fragment stage there; the environment variable decides when set."""
     needs_compute(renderer)
     times = pixel_stage_times(renderer.ctx)
     assert set(times) == {"fragment", "compute"} and min(times.values()) > 0
+    # the probe leaves the context clean: a new target after it raises no GL error (ctx)
+    renderer.render(Scene(VOLUME, TF, cameras(VOLUME)["ortho"], width=9, height=7))
     if is_llvmpipe(renderer):
         assert times["fragment"] < COMPUTE_MARGIN * times["compute"]
         assert not renderer.compute_stage_faster

@@ -7,7 +7,7 @@ import time
 
 import numpy as np
 
-from .context import current
+from .context import current, idle_framebuffer
 from .harness import evaluate
 
 
@@ -125,6 +125,7 @@ def pixel_stage_times(ctx, side=256, min_seconds=2e-3):
                 samples *= 4
             return {"fragment": fragment, "compute": seconds(compute_pass)}
         finally:
+            idle_framebuffer(ctx).use()     # (never leave a released framebuffer bound: context.idle_framebuffer)
             for obj in (vao, frag, comp, fbo, target, tex):
                 obj.release()
 
