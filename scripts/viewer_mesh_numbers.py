@@ -7,18 +7,20 @@ One viewer window per tolerance setting (none, and ``--tolerance E``), each open
 ``--sorts`` names, chosen with key c as a user would): key r resets the view, one still
 frame is rendered, then the left button is pressed and the cursor moves ``--steps``
 times by ``--pixels`` to the right, one frame after each move (the frames the viewer
-shows while the user drags: coarse ones, at half the window's resolution, or with a
-tolerance the fastest way within E that ``Renderer.mesh_tolerance_settings`` picks);
+shows while the user drags: coarse ones, at half the window's resolution, and with a
+tolerance rendered the fastest way within E that ``Renderer.mesh_tolerance_settings``
+picks, its pilot run on the first frame);
 the button is released and input settles, and the still frame follows. The viewer's
 clock is the script's: each move is 10 ms after the last, so every frame while moving
 is a coarse one however long it takes; the times are wall-clock (``perf_counter``)
 around the viewer's own ``frame`` call, GL finished.
 
-The error of the still frame: the window is then resized to ``--error-size`` (a size
-where ``reference.exact`` is affordable) and, after the same reset and drag, the still
-frame of each setting is read back as the screenshot key does (``render_image``: the
-float render target, premultiplied) and compared (RMSE, and the largest channel error)
-with ``dvr_gl.reference.exact`` of the viewer's own scene.
+The error of the still frame: the window is then resized to ``--error-size`` (default
+the same size; a smaller one where ``reference.exact`` is dear) and, after the same reset
+and the same turn (no frames while moving: a new size would run the tolerance's pilot
+again), the still frame of each setting is read back as the screenshot key does
+(``render_image``: the float render target, premultiplied) and compared (RMSE, and the
+largest channel error) with ``dvr_gl.reference.exact`` of the viewer's own scene.
 
 Run it under X (Xvfb):
 
@@ -122,11 +124,13 @@ def main(argv=None):
     parser.add_argument("--pixels", type=float, default=4.0, help="pixels per move (half a turn per window height)")
     parser.add_argument("--tolerance", type=float, default=7.38e-3,
                         help="the viewer's --tolerance (default: VTK's RMSE on the LOX post, 7.38e-3); 0: none")
-    parser.add_argument("--sorts", default="walk", help="cell orders besides the default, comma separated")
-    parser.add_argument("--error-size", default="128x128", type=parse_size,
-                        help="window size for the still frame's error against reference.exact (0x0: skip)")
+    parser.add_argument("--sorts", default="centroid,walk", help="cell orders besides the default, comma separated")
+    parser.add_argument("--error-size", type=parse_size,
+                        help="window size for the still frame's error against reference.exact "
+                             "(default: --size; 0x0: skip)")
     parser.add_argument("--shots", metavar="DIR", help="also save each still frame as a screenshot (key s) there")
     args = parser.parse_args(argv)
+    args.error_size = args.error_size or args.size
     if not os.environ.get("DISPLAY"):
         raise SystemExit("no DISPLAY: run under X, e.g. xvfb-run -a python scripts/viewer_mesh_numbers.py")
 
