@@ -213,20 +213,31 @@ void PIXEL_MAIN() {
                 float t_out = min(min(exits.x, exits.y), min(exits.z, exits.w));
                 int face = t_out == exits.x ? 0 : t_out == exits.y ? 1 : t_out == exits.z ? 2 : 3;
                 float t_in = max(t_cur, max(max(entries.x, entries.y), max(entries.z, entries.w)));
-                // a plane parallel to the ray with the ray outside it: the ray misses this
-                // cell (only where rounding put it here at a tie): no segment, the walk goes on
-                bool outside = any(lessThan(mix(vec4(1.0), room, equal(along, vec4(0.0))), vec4(0.0)));
-                a = max(t_in, kept.x);
-                b = min(t_end, kept.y);
-                // composite: cells the TF makes fully transparent add nothing (once per TF)
-                if (!outside && b > a && (MODE_COMPOSITE == 0 || (flags & SHOWN) != 0u)) {
-                    found = true;
-                    seg_cell = cell;
+                // a plane parallel to the ray with the ray outside it: the ray runs in the
+                // plane of a face this cell shares, and rounding put it on this side of the
+                // tie. The cell across that face holds it (the shared plane is stored once
+                // and negated, so there it is inside): the walk crosses to it at the same t.
+                // On the boundary (no cell across) the ray misses this cell and goes on.
+                vec4 parallel_room = mix(vec4(1.0), room, equal(along, vec4(0.0)));
+                float worst = min(min(parallel_room.x, parallel_room.y), min(parallel_room.z, parallel_room.w));
+                int side = worst == parallel_room.x ? 0 : worst == parallel_room.y ? 1 : worst == parallel_room.z ? 2 : 3;
+                bool outside = worst < 0.0;
+                if (outside && nb[side] >= 0) {
+                    next = nb[side];
+                    ++stalled;
+                } else {
+                    a = max(t_in, kept.x);
+                    b = min(t_end, kept.y);
+                    // composite: cells the TF makes fully transparent add nothing (once per TF)
+                    if (!outside && b > a && (MODE_COMPOSITE == 0 || (flags & SHOWN) != 0u)) {
+                        found = true;
+                        seg_cell = cell;
+                    }
+                    stalled = t_end > t_cur ? 0 : stalled + 1;
+                    t_cur = max(t_cur, t_end);
+                    next = t_out < 1.0e38 ? nb[face] : -1;     // none: no leaving plane but the way back
+                    if (next < 0 && (flags & FOLDS) != 0u) next = foldedNext(flags, nb, prev, origin, dir, t_cur);
                 }
-                stalled = t_end > t_cur ? 0 : stalled + 1;
-                t_cur = max(t_cur, t_end);
-                next = t_out < 1.0e38 ? nb[face] : -1;     // none: no leaving plane but the way back
-                if (next < 0 && (flags & FOLDS) != 0u) next = foldedNext(flags, nb, prev, origin, dir, t_cur);
                 if (t_cur >= kept.y) {
                     done = true;
                     break;
