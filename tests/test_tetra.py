@@ -85,7 +85,7 @@ def test_constant_cube_is_the_constant_box(renderer, split, view):
     lying in shared faces on the diagonal views), eye inside included."""
     mesh = cube_mesh(FIVE if split == "five" else SIX)
     scene = Scene(mesh, TF, VIEWS[view], 48, 48)
-    img = renderer.render(scene, technique="tetra")
+    img = renderer.render(scene, technique="tetra", sort="mpvo")
     want = closed_form_boxes(scene, [((0, 0, 0), (1, 1, 1))])
     assert np.abs(img - want).max() < GL_TOL
     assert img[..., 3].max() > 0.3
@@ -98,10 +98,10 @@ def test_either_orientation_and_zero_volume_cells_change_nothing(renderer):
     pts = np.vstack([mesh.points, [[0.5, 0.25, 0.0]]])
     flat = TetMesh(pts, np.vstack([mesh.tets, [[0, 1, 3, 8]]]), np.concatenate([mesh.scalars, [0.5]]))
     scene = Scene(mesh, TF, VIEWS["perspective"], 40, 40)
-    base = renderer.render(scene, technique="tetra")
-    assert np.array_equal(renderer.render(scene.replace(volume=flipped), technique="tetra"), base)
+    base = renderer.render(scene, technique="tetra", sort="mpvo")
+    assert np.array_equal(renderer.render(scene.replace(volume=flipped), technique="tetra", sort="mpvo"), base)
     assert M.topology(flat).flat.sum() == 1
-    assert np.abs(renderer.render(scene.replace(volume=flat), technique="tetra") - base).max() < GL_TOL
+    assert np.abs(renderer.render(scene.replace(volume=flat), technique="tetra", sort="mpvo") - base).max() < GL_TOL
 
 
 @pytest.mark.parametrize("sort", ["mpvo", "centroid"])
@@ -211,9 +211,9 @@ def test_mpvo_through_zero_volume_cells_of_a_lattice_delaunay(renderer, counts, 
             order = cell_order.mpvo_order(mesh, cell_order.visible_cells(mesh, tf), scene)
             assert order.cycles_broken == 0
             exact = dvr_gl.reference.exact(scene)
-            ref = dvr_gl.reference.render(scene, technique="tetra")
+            ref = dvr_gl.reference.render(scene, technique="tetra", sort="mpvo")
             assert np.abs(ref - exact).max() < 1e-7
-            img = renderer.render(scene, technique="tetra")
+            img = renderer.render(scene, technique="tetra", sort="mpvo")
             assert np.abs(img - exact).max() < GL_TOL
 
 
@@ -242,19 +242,19 @@ def test_transparent_cells_are_neither_sorted_nor_drawn(renderer):
 
     cam = Camera((5.0, 2.5, 4.0), (1.0, 0.5, 0.5), fov=30)
     three, two = Scene(row(3), tf, cam, 40, 40), Scene(row(2), tf, cam, 40, 40)
-    plan = tetra.make_plan(three)
+    plan = tetra.make_plan(three, sort="mpvo")
     assert plan.visible.size == plan.draw.size == 12     # the third cube (values 3 only) is out
-    assert np.abs(renderer.render(three, technique="tetra") - renderer.render(two, technique="tetra")).max() < GL_TOL
+    assert np.abs(renderer.render(three, technique="tetra", sort="mpvo") - renderer.render(two, technique="tetra", sort="mpvo")).max() < GL_TOL
     empty = TransferFunction([(0, 1, 1, 1), (1, 1, 1, 1)], [(0, 0.0), (1, 0.0)])
     scene = three.replace(tf=empty)
-    assert tetra.make_plan(scene).draw.size == 0
-    assert not renderer.render(scene, technique="tetra").any()
+    assert tetra.make_plan(scene, sort="mpvo").draw.size == 0
+    assert not renderer.render(scene, technique="tetra", sort="mpvo").any()
 
 
 def test_order_is_made_once_per_view(renderer):
     mesh = cube_mesh(SIX)
     scene = Scene(mesh, TF, VIEWS["perspective"], 24, 24)
-    renderer.render(scene, technique="tetra")
+    renderer.render(scene, technique="tetra", sort="mpvo")
     calls = []
     original = cell_order.mpvo_order
 
@@ -264,9 +264,9 @@ def test_order_is_made_once_per_view(renderer):
 
     tetra.mpvo_order = counting
     try:
-        renderer.render(scene, technique="tetra")
+        renderer.render(scene, technique="tetra", sort="mpvo")
         assert calls == []
-        renderer.render(scene.replace(camera=VIEWS["body_diagonal"]), technique="tetra")
+        renderer.render(scene.replace(camera=VIEWS["body_diagonal"]), technique="tetra", sort="mpvo")
         assert calls == [1]
     finally:
         tetra.mpvo_order = original
@@ -277,7 +277,7 @@ def test_mesh_data_uploaded_once(renderer):
     scene = Scene(mesh, TF, VIEWS["perspective"], 16, 16)
     before = len([c for c in renderer.created if c[0] == "tetra_mesh"])
     for cam in (VIEWS["perspective"], VIEWS["along_z"], VIEWS["body_diagonal"]):
-        renderer.render(scene.replace(camera=cam), technique="tetra")
+        renderer.render(scene.replace(camera=cam), technique="tetra", sort="mpvo")
     assert len([c for c in renderer.created if c[0] == "tetra_mesh"]) == before + 1
 
 
@@ -292,7 +292,7 @@ def test_options_and_data_kinds_are_checked(renderer):
         renderer.render(scene, technique="raycast")
     vol = dvr_gl.Volume(np.zeros((2, 2, 2), np.float32))
     with pytest.raises(ValueError, match="Volume"):
-        renderer.render(scene.replace(volume=vol), technique="tetra")
+        renderer.render(scene.replace(volume=vol), technique="tetra", sort="mpvo")
     assert dvr_gl.techniques.for_scene(scene) == ("tetra", "particles", "splat")
 
 
@@ -309,7 +309,7 @@ def test_segment_integral_shader_matches_numpy(renderer):
         values = a + b * CUBE[:, 2]
         mesh = TetMesh(CUBE, SIX, values)
         scene = Scene(mesh, tf, Camera((0.5, 0.5, 3.0), (0.5, 0.5, 0.5), ortho_height=0.9), 8, 8)
-        img = renderer.render(scene, technique="tetra")
+        img = renderer.render(scene, technique="tetra", sort="mpvo")
         want = linear_segment(SegmentKnots(tf), a + b * 1.0, a + b * 0.0, 1.0)[0]
         assert np.abs(img - want).max() < 2e-5, (a, b)
 
@@ -343,7 +343,7 @@ def test_reduction_modes_on_a_linear_field(renderer, mode):
     mesh = TetMesh(CUBE, SIX, CUBE[:, 2] + 0.2 * CUBE[:, 0])
     tf = TransferFunction([(0, 1, 0, 0), (1.2, 0, 0, 1)], [(0, 0.1), (1.2, 0.9)], unit_distance=0.5)
     scene = Scene(mesh, tf, Camera((0.5, 0.5, 3.0), (0.5, 0.5, 0.5), ortho_height=1.6), 16, 16, mode=mode)
-    img = renderer.render(scene, technique="tetra")
+    img = renderer.render(scene, technique="tetra", sort="mpvo")
     o, _ = scene.camera.rays(16, 16)
     x, y = o[..., 0], o[..., 1]
     inside = (x >= 0) & (x <= 1) & (y >= 0) & (y <= 1)
@@ -351,7 +351,7 @@ def test_reduction_modes_on_a_linear_field(renderer, mode):
     a = np.where(inside, tf.opacity(s), 0.0)
     want = np.concatenate([tf.color(s) * a[..., None], a[..., None]], axis=-1)
     assert np.abs(img - want).max() < 1e-6
-    assert tetra.make_plan(scene).draw.size == mesh.n_tets     # nothing is culled or sorted
+    assert tetra.make_plan(scene, sort="mpvo").draw.size == mesh.n_tets     # nothing is culled or sorted
 
 
 def test_grid_and_its_tetrahedralisation_agree_within_interpolation():
@@ -373,7 +373,7 @@ def test_grid_and_its_tetrahedralisation_agree_within_interpolation():
     exact_grid = dvr_gl.reference.exact(grid)
     assert np.abs(dvr_gl.reference.exact(mesh) - exact_grid).max() < 1e-9
     with dvr_gl.Renderer() as r:
-        assert np.abs(r.render(mesh, technique="tetra") - exact_grid).max() < GL_TOL
+        assert np.abs(r.render(mesh, technique="tetra", sort="mpvo") - exact_grid).max() < GL_TOL
     assert exact_grid[..., 3].max() > 0.3
 
     def curved(x, y, z):
@@ -407,7 +407,7 @@ def test_slivers_glued_to_a_cube(renderer, height):
                 Camera((0.7, 0.2, -2.5), (0.5, 0.5, 0.5), fov=40),
                 Camera((-2.0, -1.5, 0.0), (0.5, 0.5, 0.0), up=(0, 0, 1), fov=50)):
         scene = Scene(mesh, TF, cam, 40, 40)
-        img = renderer.render(scene, technique="tetra")
+        img = renderer.render(scene, technique="tetra", sort="mpvo")
         assert np.abs(img - dvr_gl.reference.exact(scene)).max() < GL_TOL
         assert img[..., 3].max() > 0.2
 
@@ -419,15 +419,15 @@ def test_depth_ranges_restart_and_cells_behind_the_eye_get_their_own_draws(rende
     are drawn in runs of their own."""
     mesh = blocks_mesh([(x, y, z) for x in range(3) for y in range(2) for z in range(3)])
     scene = Scene(mesh, TF, Camera((1.5, 1.0, 2.5), (1.5, 1.0, -3.0), fov=70), 40, 32)
-    plan = tetra.make_plan(scene)
+    plan = tetra.make_plan(scene, sort="mpvo")
     calls = tetra.draw_calls(plan)
     assert any(exact for _, _, exact in calls) and not all(exact for _, _, exact in calls)
     assert sum(count for _, count, _ in calls) == plan.draw.size
     for s in (scene, scene.replace(camera=Camera((6.0, 5.0, 7.0), (1.5, 1.0, 1.0), fov=30))):
-        whole = renderer.render(s, technique="tetra")
+        whole = renderer.render(s, technique="tetra", sort="mpvo")
         monkeypatch.setattr(tetra, "SLOTS_PER_DEPTH_RANGE", 7)
-        assert len(tetra.draw_calls(tetra.make_plan(s))) >= plan.draw.size // 7
-        chunked = renderer.render(s, technique="tetra")
+        assert len(tetra.draw_calls(tetra.make_plan(s, sort="mpvo"))) >= plan.draw.size // 7
+        chunked = renderer.render(s, technique="tetra", sort="mpvo")
         monkeypatch.undo()
         assert whole[..., 3].max() > 0.3
         assert np.abs(chunked - whole).max() == 0.0
@@ -446,9 +446,9 @@ def test_sliver_cells_of_near_coincident_points_keep_their_values(renderer, azim
     mesh = TetMesh.from_points(points, rng.random(len(points)))
     tf = TransferFunction([(0, 1, 0.2, 0.2), (2, 1, 0.2, 0.2)], [(0, 0.02), (1.0, 0.02), (1.5, 1.0)], unit_distance=1.0)
     scene = Scene(mesh, tf, dvr_gl.default_camera(mesh, azimuth=azimuth, elevation=20), 48, 48)
-    ref = dvr_gl.reference.render(scene, technique="tetra")
+    ref = dvr_gl.reference.render(scene, technique="tetra", sort="mpvo")
     assert ref[..., 3].max() < 0.05
-    assert np.abs(renderer.render(scene, technique="tetra") - ref).max() < GL_TOL
+    assert np.abs(renderer.render(scene, technique="tetra", sort="mpvo") - ref).max() < GL_TOL
 
 
 @pytest.mark.parametrize("ortho", [True, False])
@@ -465,9 +465,9 @@ def test_rays_in_a_boundary_face_plane_of_an_odd_sized_image(renderer, ortho):
     eye, target = (lo[0] - 2, lo[1], 0.5 * (lo[2] + hi[2])), (hi[0], lo[1], 0.5 * (lo[2] + hi[2]))
     cam = Camera(eye, target, ortho_height=2.0) if ortho else Camera(eye, target, fov=40.0)
     scene = Scene(mesh, tf, cam, 38, 47)
-    ref = dvr_gl.reference.render(scene, technique="tetra")
+    ref = dvr_gl.reference.render(scene, technique="tetra", sort="mpvo")
     assert ref[23, :, 3].max() > 0.5
-    assert np.abs(renderer.render(scene, technique="tetra") - ref).max() < GL_TOL
+    assert np.abs(renderer.render(scene, technique="tetra", sort="mpvo") - ref).max() < GL_TOL
 
 
 @pytest.mark.parametrize("ortho", [True, False])
@@ -487,6 +487,6 @@ def test_a_thin_slab_seen_grazing_keeps_every_cell(renderer, ortho):
     d /= np.linalg.norm(d)
     cam = Camera(d * 4, (0, 0, 0), ortho_height=2.6) if ortho else Camera(d * 4, (0, 0, 0), fov=40)
     scene = Scene(mesh, tf, cam, 37, 23)
-    ref = dvr_gl.reference.render(scene, technique="tetra")
+    ref = dvr_gl.reference.render(scene, technique="tetra", sort="mpvo")
     assert ref[..., 3].max() > 0.5
-    assert np.abs(renderer.render(scene, technique="tetra") - ref).max() < GL_TOL
+    assert np.abs(renderer.render(scene, technique="tetra", sort="mpvo") - ref).max() < GL_TOL

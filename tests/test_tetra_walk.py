@@ -303,7 +303,7 @@ def test_what_the_walk_does_not_do_is_a_named_error(renderer, monkeypatch):
         renderer.render(scene, technique="tetra", sort="walk")
     monkeypatch.undo()
     assert "walk" in tetra.SORTS
-    with pytest.raises(ValueError, match="sort must be one of mpvo, centroid, walk"):
+    with pytest.raises(ValueError, match="sort must be auto or one of mpvo, centroid, walk, got 'bsp'"):
         tetra.make_plan(scene, sort="bsp")
 
 

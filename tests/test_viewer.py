@@ -941,8 +941,14 @@ def test_mesh_orbit_sort_and_modes(mesh_viewer):
     v.refine()
     after = v.render_image()
     assert after[..., 3].max() > 0.5 and np.abs(after - before).max() > 0.05
-    # c: tetra's cell order, mpvo -> centroid -> walk -> mpvo, passed as its sort option
-    assert v.render_arguments()[3].get("sort", "mpvo") == "mpvo" and "(mpvo)" in v.title
+    # c: tetra's cell order, from the default (auto: the walk) to mpvo -> centroid -> walk,
+    # passed as its sort option
+    assert "sort" not in v.render_arguments()[3] and "(auto)" in v.title
+    press(v, "c")
+    assert v.render_arguments()[3] == {"sort": "mpvo"} and v.messages[-1] == "sort mpvo"
+    v.refine()
+    mpvo = v.render_image()
+    assert "(mpvo)" in v.title and np.abs(mpvo - after).max() < 1e-4
     press(v, "c")
     assert v.render_arguments()[3] == {"sort": "centroid"} and v.messages[-1] == "sort centroid"
     v.refine()
@@ -957,7 +963,7 @@ def test_mesh_orbit_sort_and_modes(mesh_viewer):
     press(v, "c")
     assert v.render_arguments()[3] == {"sort": "mpvo"}
     v.refine()
-    assert np.abs(v.render_image() - after).max() < 1e-6
+    assert np.abs(v.render_image() - mpvo).max() < 1e-6
     # m: every mode tetra renders is reached; the others are skipped and named, never crash
     modes = _tetra().MODES
     seen = []

@@ -226,9 +226,10 @@ def add_render_options(r):
                         "particles or splat for both (default: raycast, or tetra for a mesh)")
     r.add_argument("--scalars", metavar="NAME",
                    help="mesh inputs: the point array to render (default: the first scalar array)")
-    r.add_argument("--sort", choices=SORTS,
+    r.add_argument("--sort", choices=("auto",) + SORTS,
                    help="tetra: cell order, exact per pixel (mpvo) or by centroid distance, or none: each ray "
-                        "walked cell to cell on the GPU (walk) (default: mpvo)")
+                        "walked cell to cell on the GPU (walk) (default: auto, the walk for meshes of fewer "
+                        "than 2^24 tets)")
     r.add_argument("--repetitions", type=_count, metavar="R",
                    help="particles: independent particle sets averaged (default: 1)")
     r.add_argument("--seed", type=_count, metavar="N", help="particles: random seed (default: 0)")

@@ -48,11 +48,13 @@ surface behind the shortened ray's classified value.
 
 Options (same names in ``dvr_gl.reference.render``)
 ---------------------------------------------------
-sort : "mpvo" (default): visibility order exact at every pixel centre, non-convex
-    domains included; "centroid": cells by centroid distance from the eye (cheaper; its
-    error is measured in docs/notes/tetra_vs_vtk.md); "walk": no order at all, each
-    pixel's ray walked from cell to cell through the face adjacency on the GPU, the same
-    exact segments composited front to back (``dvr_gl.techniques.tetra_walk``).
+sort : "auto" (default): "walk" for meshes it takes (fewer than 2^24 tets), else "mpvo",
+    so that nothing is ordered per view on the CPU; "mpvo": visibility order exact at
+    every pixel centre, non-convex domains included; "centroid": cells by centroid
+    distance from the eye (cheaper; its error is measured in docs/notes/tetra_vs_vtk.md);
+    "walk": no order at all, each pixel's ray walked from cell to cell through the face
+    adjacency on the GPU, the same exact segments composited front to back
+    (``dvr_gl.techniques.tetra_walk``). The plan keeps the order taken.
 target : "rgba32f" (default) | "rgba16f" | "rgba8"
     blending happens in the target.
 """
@@ -90,7 +92,7 @@ class TetraPlan:
     visible: np.ndarray            # cells with non-zero opacity somewhere in their range
     order: object                  # mesh.Order: cells back to front, cycles, gap constraints
     draw: np.ndarray               # int32 cells to draw, back to front (no zero-volume cells)
-    sort: str = "mpvo"
+    sort: str = "mpvo"             # the order taken ("auto" resolved)
     target: str = "rgba32f"
     defines: dict = field(default_factory=dict)
     sort_seconds: float = 0.0      # time spent ordering for this view (0 when cached)
@@ -150,15 +152,18 @@ def _drop_clipped(scene, cells, tables):
     return cells[keep[cells]]
 
 
-def make_plan(scene, step=None, *, sort="mpvo", target="rgba32f", stage="auto", tables=None):
+def make_plan(scene, step=None, *, sort="auto", target="rgba32f", stage="auto", tables=None):
     """Validate the options and decide what the scene needs. ``tables`` keeps the
     visible cells (per TF) and the order (per view) between frames."""
     tables = tables or TableCache()
     check_scene(scene, "tetra", MODES, data="mesh")
     if step is not None:
         raise ValueError(f"tetra takes no step (each cell is integrated exactly), got step={step!r}")
-    if sort not in SORTS:
-        raise ValueError(f"sort must be one of {', '.join(SORTS)}, got {sort!r}")
+    if sort != "auto" and sort not in SORTS:
+        raise ValueError(f"sort must be auto or one of {', '.join(SORTS)}, got {sort!r}")
+    if sort == "auto":
+        from .tetra_walk import MAX_CELLS
+        sort = "walk" if scene.volume.n_tets < MAX_CELLS else "mpvo"
     check_target(target)
     check_stage(stage)
     mesh, tf = scene.volume, scene.tf

@@ -113,16 +113,16 @@ def switch_option(v, option):
 
 
 def next_sort(v):
-    """Key c: the next cell order of a technique with a ``sort`` option (tetra:
-    "mpvo", exact per pixel; "centroid", cheaper; "walk", each ray walked from cell to
-    cell on the GPU, exact with no order at all)."""
+    """Key c: the next cell order of a technique with a ``sort`` option (tetra: from the
+    default walk, each ray walked from cell to cell on the GPU, exact with no order at
+    all, to "mpvo", exact per pixel; "centroid", cheaper; and "walk" again)."""
     if not v.info.accepts("sort") or v.info.params is None:
         v.say(f"{v.technique} has no sort option (tetra's cell order, for meshes)")
         return False
     from ...techniques import get_technique
 
     sorts = tuple(getattr(get_technique(v.technique), "SORTS", ("mpvo", "centroid")))
-    now = v.options.get("sort", sorts[0])
+    now = v.options.get("sort", "walk")       # (the default, auto, is the walk where it takes the mesh)
     new = sorts[(sorts.index(now) + 1) % len(sorts)] if now in sorts else sorts[0]
     if v.try_change(lambda: v.options.__setitem__("sort", new), f"use sort {new}"):
         v.say(f"sort {new}")

@@ -46,7 +46,7 @@ def window_title(viewer):
         step += f", interpolate {options['interpolate']}"
     extras = [k for k in ("preintegrate",) if options.get(k)]
     if info.accepts("sort") and info.params is not None:
-        extras.append(str(options.get("sort", "mpvo")))
+        extras.append(str(options.get("sort", "auto")))
     if viewer.lit:
         extras.append("shaded")
     if viewer.layers:
