@@ -137,11 +137,27 @@ def test_a_bad_stage_is_named():
         tetra.make_plan(Scene(mesh, synthetic_tf(), dvr_gl.default_camera(mesh), 8, 8), sort="walk", stage=3)
 
 
-def test_several_volumes_name_what_they_do_not_take_yet():
-    scene = Scene.from_layers([dvr_gl.Layer(VOLUME, TF), dvr_gl.Layer(VOLUME, TF)],
-                              camera=cameras(VOLUME)["ortho"], width=8, height=8)
-    with pytest.raises(ValueError, match=r"several volumes \(Scene.layers\) do not yet take stage='compute'"):
-        raycast.make_plan(scene, stage="compute")
-    with pytest.raises(ValueError, match="do not yet take interpolation='texture_unit'"):
+def test_several_volumes_in_the_compute_stage(ctx, renderer):
+    """Layers (a second, rotated and shifted grid mixed in, and two channels added) in
+    the compute stage: the fragment stage's image (bit for bit on llvmpipe). What layers
+    do not take yet is named."""
+    needs_compute(renderer)
+    turn = np.radians(30)
+    m = np.eye(4)
+    m[:3, :3] = [[np.cos(turn), -np.sin(turn), 0], [np.sin(turn), np.cos(turn), 0], [0, 0, 1]]
+    m[:3, 3] = (4.0, 2.0, 1.0)
+    cam = cameras(VOLUME)["perspective"]
+    for blend in ("mix", "add"):
+        scene = Scene.from_layers([dvr_gl.Layer(VOLUME, TF), dvr_gl.Layer(VOLUME, TF, m)], camera=cam,
+                                  width=37, height=29, blend=blend)
+        a = renderer.render(scene, stage="fragment")
+        b = renderer.render(scene, stage="compute")
+        assert b[..., 3].max() > 0.1
+        if is_llvmpipe(renderer):
+            assert np.array_equal(a, b)
+        else:
+            assert np.abs(a - b).max() < 1e-5
+    with pytest.raises(ValueError, match="stage must be one of"):
+        raycast.make_plan(scene, stage="vertex")
+    with pytest.raises(ValueError, match=r"several volumes \(Scene.layers\) do not yet take interpolation='texture_unit'"):
         raycast.make_plan(scene, interpolation="texture_unit")
-    raycast.make_plan(scene, stage="fragment")

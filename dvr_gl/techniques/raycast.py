@@ -186,12 +186,12 @@ def make_plan(scene, step=None, *, target="rgba32f", jitter_seed=None, ert_trans
     ranges between frames."""
     if isinstance(scene, Scene) and scene.layers:   # several volumes: raycast_layers plans them (same options)
         check_bricking(scene, brick_size, preintegrate, gradients)    # (not bricked yet: a named error)
-        for name, value, only in (("stage", stage, ("auto", "fragment")), ("interpolation", interpolation, ("exact",)),
-                                  ("refine_walk", refine_walk, ("even",))):
+        check_stage(stage)
+        for name, value, only in (("interpolation", interpolation, ("exact",)), ("refine_walk", refine_walk, ("even",))):
             if value not in only:
                 raise ValueError(f"several volumes (Scene.layers) do not yet take {name}={value!r}")
         return raycast_layers.make_plan(**{k: v for k, v in locals().items()
-                                           if k not in ("brick_size", "memory", "stage", "interpolation", "refine_walk",
+                                           if k not in ("brick_size", "memory", "interpolation", "refine_walk",
                                                         "name", "value", "only")})
     tables = tables or TableCache()
     check_scene(scene, "raycast")

@@ -83,11 +83,11 @@ from ..model.layers import MAX_LAYERS
 from ..model.scene import Scene
 from ..model.transfer import LookupTable
 from ..util.cache import IdentityKey, TableCache
-from .common import (bind, box_proxy, draw_ray_proxy, camera_uniforms, check_flag, check_scene, check_step, check_target,
+from .common import (TARGETS, bind, box_proxy, draw_ray_proxy, camera_uniforms, check_flag, check_scene, check_step, check_target,
                      clip_defines, clip_uniforms, grow_pixels)
 from .bricks import brick_occupancy, partition, value_ranges
 from .geometry import surface_pass
-from .gpu import tf_texture, volume_texture
+from .gpu import IMAGE_FORMATS, draw_ray_compute, pixel_stage, tf_texture, volume_texture
 
 BRICK = 8     # brick edge in cells for empty-space skipping (as the one-volume ray caster's)
 MIN_EMPTY_BRICKS = 0.2   # the share of empty bricks below which a layer is treated as full
@@ -103,6 +103,7 @@ class LayersPlan:
     ert_transmittance: float = 0.0
     defines: dict = field(default_factory=dict)
     occupancy: tuple | None = None   # per layer (bz, by, bx) bool, or None when not skipping
+    stage: str = "auto"              # where the per-pixel shader runs (gpu.pixel_stage)
 
     @property
     def layers(self):
@@ -136,7 +137,7 @@ def layers_default_step(scene):
 
 def make_plan(scene, step=None, *, target="rgba32f", jitter_seed=None, ert_transmittance=1e-3,
               skip_empty=True, preintegrate=False, refine=1, gradients="on_the_fly", step_table=True,
-              tables=None):
+              stage="auto", tables=None):
     """Validate the options for a scene with layers (``raycast.make_plan``'s signature,
     which passes them all on)."""
     tables = tables or TableCache()
@@ -199,7 +200,7 @@ def make_plan(scene, step=None, *, target="rgba32f", jitter_seed=None, ert_trans
             for i in np.flatnonzero(full):
                 defines[f"LAYER{i}_OCCUPIED"] = 1
     return LayersPlan(scene=scene, step=float(step), tables=classes, target=target, ert_transmittance=ert,
-                      defines=defines, occupancy=occupancy)
+                      defines=defines, occupancy=occupancy, stage=stage)
 
 
 def brick_ranges(values):
@@ -338,7 +339,9 @@ def draw(renderer, plan):
     ctx = renderer.ctx
     scene = plan.scene
     surfaces = surface_pass(renderer, scene) if scene.geometry else None
-    prog = renderer.programs.get("raycast/raycast.vert", "raycast/layers.frag", plan.defines)
+    compute = pixel_stage(renderer, plan.stage) == "compute"
+    prog = (renderer.programs.compute("raycast/layers.frag", dict(plan.defines, IMAGE_FORMAT=IMAGE_FORMATS[plan.target]))
+            if compute else renderer.programs.get("raycast/raycast.vert", "raycast/layers.frag", plan.defines))
     textures = {}
     for i, (vol_tex, class_tex) in enumerate(_layer_textures(renderer, plan)):
         textures[f"t_layer{i}"] = vol_tex
@@ -356,5 +359,7 @@ def draw(renderer, plan):
         uniforms["u_brick"] = float(BRICK)
         uniforms.update(occupied_boxes(plan, BRICK))
     bind(prog, textures, uniforms)
+    if compute:
+        return draw_ray_compute(renderer, prog, scene, TARGETS[plan.target])
     kind, view_proj = union_proxy(scene, grow_pixels(ctx))
     return draw_ray_proxy(renderer, prog, scene, plan.target, kind, view_proj, surfaces)

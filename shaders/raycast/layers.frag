@@ -110,7 +110,11 @@ uniform sampler3D t_occupancy3;
   #endif
 #endif
 
+#if COMPUTE_PIXELS
+vec4 f_color;                 // stored by common/pixel_store.glsl's main()
+#else
 out vec4 f_color;
+#endif
 
 // A table row at value s, linear between entries (GLSL lerpTableRow with the layer's
 // own mapping; NumPy twin: LookupTable.interpolate).
@@ -264,7 +268,7 @@ vec4 finalClass(sampler2D table, int i, float best, float len_sum) {
     return vec4(rgba.rgb * rgba.a, rgba.a);
 }
 
-void main() {
+void PIXEL_MAIN() {
     vec3 origin, dir;
     pixelRay(origin, dir);
     vec3 o[N_LAYERS];
@@ -283,7 +287,7 @@ void main() {
     vec2 range = clipRange(origin, dir, vec2(t_lo, t_hi));
     f_color = vec4(0.0);
 #if GEOMETRY
-    vec4 surface = texelFetch(t_surface, ivec2(gl_FragCoord.xy), 0);
+    vec4 surface = texelFetch(t_surface, ivec2(FRAG_COORD.xy), 0);
     bool on_surface = surface.a < 1e38;
     range.y = min(range.y, surface.a);
     if (range.y <= range.x) {
@@ -506,3 +510,5 @@ void main() {
     if (on_surface) f_color = vec4(f_color.rgb + (1.0 - f_color.a) * surface.rgb, 1.0);
 #endif
 }
+
+#include "common/pixel_store.glsl"

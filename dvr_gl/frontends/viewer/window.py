@@ -66,19 +66,24 @@ def open_window(size, title, visible=True, vsync=True):
             raise WindowError(no_display_message(str(e))) from None
         if not ok:
             raise WindowError(no_display_message("glfw could not be initialised"))
-        glfw.default_window_hints()
-        glfw.window_hint(glfw.CONTEXT_VERSION_MAJOR, 3)
-        glfw.window_hint(glfw.CONTEXT_VERSION_MINOR, 3)
-        glfw.window_hint(glfw.OPENGL_PROFILE, glfw.OPENGL_CORE_PROFILE)
-        glfw.window_hint(glfw.OPENGL_FORWARD_COMPAT, True)
-        glfw.window_hint(glfw.VISIBLE, bool(visible))
-        release_current_egl()  # glfw makes its new context current to test it
-        try:
-            window = glfw.create_window(width, height, title, None, None)
-        except glfw.GLFWError as e:
-            raise WindowError(f"cannot open an OpenGL 3.3 core window: {e}") from None
+        # 4.3 where the driver has it (compute shaders: techniques.gpu.pixel_stage), else 3.3
+        window, failure = None, None
+        for minor_4_3 in (True, False):
+            glfw.default_window_hints()
+            glfw.window_hint(glfw.CONTEXT_VERSION_MAJOR, 4 if minor_4_3 else 3)
+            glfw.window_hint(glfw.CONTEXT_VERSION_MINOR, 3)
+            glfw.window_hint(glfw.OPENGL_PROFILE, glfw.OPENGL_CORE_PROFILE)
+            glfw.window_hint(glfw.OPENGL_FORWARD_COMPAT, True)
+            glfw.window_hint(glfw.VISIBLE, bool(visible))
+            release_current_egl()  # glfw makes its new context current to test it
+            try:
+                window = glfw.create_window(width, height, title, None, None)
+            except glfw.GLFWError as e:
+                failure = e
+            if window:
+                break
         if not window:
-            raise WindowError("cannot open an OpenGL 3.3 core window")
+            raise WindowError("cannot open an OpenGL 3.3 core window" + (f": {failure}" if failure else ""))
     finally:
         glfw.ERROR_REPORTING = old
     glfw.make_context_current(window)
