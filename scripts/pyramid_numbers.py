@@ -40,16 +40,6 @@ SHAPE = (133, 256, 256)
 SPACING = (1.40625, 1.40625, 2.5)
 
 
-def median_seconds(frame, repeats=5):
-    frame()
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        frame()
-        times.append(time.perf_counter() - t0)
-    return float(np.median(times))
-
-
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", default=os.path.join(os.path.dirname(__file__), "..", "..", "shared", "data"))
@@ -66,6 +56,7 @@ def main(argv=None):
     from dvr_gl.frontends.inputs import first_camera
     from dvr_gl.model.transfer import ct_8bit_preset, save_tf_json
     from dvr_gl.reference.exact import exact
+    from dvr_gl.rendering.tolerance import median_seconds
 
     samples = np.frombuffer(gzip.open(os.path.join(args.data, *CHEST)).read(), np.uint8).reshape(SHAPE)
     store = out / "chest.zarr"

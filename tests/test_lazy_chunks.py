@@ -12,6 +12,8 @@ from dvr_gl.model.lazy_volume import LazyVolume, brick_summary
 from dvr_gl.techniques import bricks, raycast
 from dvr_gl.util.memory import BrickCache
 
+from test_lazy_render import _counting
+
 zarr = pytest.importorskip("zarr")
 
 SHAPE = (40, 48, 56)        # (nz, ny, nx)
@@ -40,17 +42,6 @@ def store(tmp_path):
 
 def _open(path):
     return LazyVolume(zarr.open_array(path, mode="r"))
-
-
-def _counting(volume):
-    calls = []
-    read = volume.read
-
-    def counted(*block):
-        calls.append(block)
-        return read(*block)
-    volume.read = counted
-    return calls
 
 
 def test_a_block_from_chunks_is_the_slice(store):

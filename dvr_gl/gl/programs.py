@@ -147,11 +147,11 @@ class ProgramCache:
         prog = self._programs.get(key)
         if prog is None:
             defines = {**_only_declared(fragment, self.context_defines), **defines}
-            source = build_source(fragment, defines)
-            if "\n#version 330 core\n" not in "\n" + source:
+            source, found = re.subn(r"^#version 330 core$", "#version 430 core", build_source(fragment, defines),
+                                    count=1, flags=re.M)
+            if not found:
                 raise ShaderSourceError(f"{fragment}: a per-pixel shader for the compute stage is "
                                         f"'#version 330 core'")
-            source = ("\n" + source).replace("\n#version 330 core\n", "\n#version 430 core\n", 1)[1:]
             prog = ComputeProgram(self.ctx.compute_shader(source))
             self._programs[key] = prog
             self.sources[key] = (source,)

@@ -42,7 +42,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .tolerance import check_tolerance, rmse, scaled_scene
+from .tolerance import check_tolerance, median_seconds, rmse, scaled_scene
 
 PILOT_SIDE = 64
 SAFETY = 0.7
@@ -150,18 +150,6 @@ def way_arguments(scene, way, tables):
     return scene.replace(volume=grid), way.technique, way.step * grid.min_spacing, dict(way.options)
 
 
-def median_seconds(frame, repeats=TIMING_REPEATS):
-    """Median seconds of ``repeats`` calls of ``frame`` (which reads its image back),
-    after one untimed call."""
-    frame()
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        frame()
-        times.append(time.perf_counter() - t0)
-    return float(np.median(times))
-
-
 @dataclass
 class PilotRecord:
     """What the pilot measured for one view family and size: the pilot view (the family's
@@ -210,7 +198,7 @@ def choose(render, scene, tolerance, tables, record=None, exact=None, ways=None)
         for way in within:
             if way not in record.seconds:
                 args = way_arguments(timed, way, tables)
-                record.seconds[way] = median_seconds(lambda: render(*args))
+                record.seconds[way] = median_seconds(lambda: render(*args), TIMING_REPEATS)
         best = min(within, key=lambda w: record.seconds[w])
     elif within:
         best = within[0]

@@ -255,11 +255,10 @@ class Renderer:
     def read_target(self, fbo, width, height):
         """Read back as float32 (GL finishes before this returns), row 0 on top."""
         image = np.empty((height, width, 4), np.float32)     # read straight into NumPy's memory
+        fbo.read_into(image, viewport=(0, 0, width, height), components=4, dtype="f4")
         if fbo is self.top_down_target:                      # stored row 0 on top: as it is
             self.top_down_target = None
-            fbo.read_into(image, viewport=(0, 0, width, height), components=4, dtype="f4")
             return image
-        fbo.read_into(image, viewport=(0, 0, width, height), components=4, dtype="f4")
         return np.ascontiguousarray(image[::-1])
 
 

@@ -142,12 +142,12 @@ def scaled_scene(scene, side):
     return scene.replace(width=max(8, round(scene.width * scale)), height=max(8, round(scene.height * scale)))
 
 
-def median_seconds(frame):
-    """The median time of TIMING_REPEATS calls of ``frame`` after one untimed call (which
+def median_seconds(frame, repeats=TIMING_REPEATS):
+    """The median time of ``repeats`` calls of ``frame`` after one untimed call (which
     builds tables and compiles the shader); ``frame`` returns the image, read back."""
     frame()
     times = []
-    for _ in range(TIMING_REPEATS):
+    for _ in range(repeats):
         t0 = time.perf_counter()
         frame()
         times.append(time.perf_counter() - t0)

@@ -85,7 +85,6 @@ def preintegration_texture(renderer, table, fine=None):
 
 
 STAGES = ("auto", "fragment", "compute")
-IMAGE_FORMATS = {"rgba32f": "rgba32f", "rgba16f": "rgba16f", "rgba8": "rgba8"}   # target -> GLSL image format
 
 
 def check_stage(stage):

@@ -130,7 +130,7 @@ from . import raycast_layers
 from .bricks import (brick_occupancy, brick_size_for, bricked_defines, check_bricking, draw as draw_bricked,
                      halo_for, unsupported)
 from .lazy_bricks import plan_lazy
-from .gpu import (IMAGE_FORMATS, check_interpolation, check_stage, draw_ray_compute, jitter_texture, occupancy_texture,
+from .gpu import (check_interpolation, check_stage, draw_ray_compute, jitter_texture, occupancy_texture,
                   pixel_stage, table_texture, target_fbo, tf_texture, volume_texture)
 
 BRICK = 8            # brick edge in cells, for empty-space skipping
@@ -546,7 +546,7 @@ def draw(renderer, plan):
     brick_size = brick_size_for(renderer, plan)     # None: the volume in one texture
     compute = not brick_size and pixel_stage(renderer, plan.stage) == "compute"
     if compute:
-        prog = renderer.programs.compute("raycast/raycast.frag", dict(defines, IMAGE_FORMAT=IMAGE_FORMATS[plan.target]))
+        prog = renderer.programs.compute("raycast/raycast.frag", dict(defines, IMAGE_FORMAT=plan.target))
     else:
         prog = renderer.programs.get("raycast/raycast.vert", "raycast/raycast.frag",
                                      dict(defines, **bricked_defines(renderer, volume)) if brick_size else defines)

@@ -87,7 +87,7 @@ from .common import (TARGETS, bind, box_proxy, draw_ray_proxy, camera_uniforms, 
                      clip_defines, clip_uniforms, grow_pixels)
 from .bricks import brick_occupancy, partition, value_ranges
 from .geometry import surface_pass
-from .gpu import IMAGE_FORMATS, draw_ray_compute, pixel_stage, tf_texture, volume_texture
+from .gpu import draw_ray_compute, pixel_stage, tf_texture, volume_texture
 
 BRICK = 8     # brick edge in cells for empty-space skipping (as the one-volume ray caster's)
 MIN_EMPTY_BRICKS = 0.2   # the share of empty bricks below which a layer is treated as full
@@ -340,7 +340,7 @@ def draw(renderer, plan):
     scene = plan.scene
     surfaces = surface_pass(renderer, scene) if scene.geometry else None
     compute = pixel_stage(renderer, plan.stage) == "compute"
-    prog = (renderer.programs.compute("raycast/layers.frag", dict(plan.defines, IMAGE_FORMAT=IMAGE_FORMATS[plan.target]))
+    prog = (renderer.programs.compute("raycast/layers.frag", dict(plan.defines, IMAGE_FORMAT=plan.target))
             if compute else renderer.programs.get("raycast/raycast.vert", "raycast/layers.frag", plan.defines))
     textures = {}
     for i, (vol_tex, class_tex) in enumerate(_layer_textures(renderer, plan)):

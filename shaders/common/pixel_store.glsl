@@ -4,7 +4,7 @@
 // Include at the end of a shader that declares `vec4 f_color` when COMPUTE_PIXELS.
 #if COMPUTE_PIXELS
 #ifndef IMAGE_FORMAT
-#define IMAGE_FORMAT rgba32f      // the target's format: rgba32f, rgba16f or rgba8
+#define IMAGE_FORMAT rgba32f      // the target's format: its name (rgba32f, rgba16f, rgba8) is GLSL's
 #endif
 layout(local_size_x = 8, local_size_y = 8) in;
 layout(IMAGE_FORMAT, binding = 0) uniform writeonly image2D u_target;
