@@ -114,7 +114,7 @@ class ProgramCache:
         self._probe = probe
         self._programs = {}
         self._context_defines = None
-        self.sources = {}  # key -> (vertex source, fragment source), for tests and debugging
+        self.sources = {}  # key -> (vertex source, fragment source[, geometry]); compute: (None, source)
 
     @property
     def context_defines(self):
@@ -154,7 +154,7 @@ class ProgramCache:
                                         f"'#version 330 core'")
             prog = ComputeProgram(self.ctx.compute_shader(source))
             self._programs[key] = prog
-            self.sources[key] = (source,)
+            self.sources[key] = (None, source)     # (no vertex stage; the per-pixel shader's source)
         return prog
 
     def release(self):
