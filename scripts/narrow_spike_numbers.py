@@ -7,7 +7,7 @@ can be), the bundled CT head with the spike 1 % wide of ``apps/tolerance_vs_vtk.
 GPU ray caster at one voxel (its RMSE there); ``Renderer.render(scene, tolerance=E)``
 (its pilot outside the timed frames), and the same with the walk by reach asked for
 (``preintegrate=True, refine=8, refine_walk="reach"``); and, for each way of sampling (plain, pre-integrated,
-refined with even parts, refined walked by reach), the longest step of a ladder from 4 to
+refined with even parts, refined walked by reach, walked by crossings), the longest step of a ladder from 4 to
 1/8 voxel (2^(1/4) apart) whose RMSE is at most ``E``. VTK's frame, the tolerance frame and
 those candidates are timed in one round robin at ``--size`` (median of ``--repeats``).
 
@@ -33,7 +33,9 @@ WAYS = (("plain", {}), ("pre-int.", {"preintegrate": True}),
         ("refine 4, even", {"preintegrate": True, "refine": 4}),
         ("refine 8, even", {"preintegrate": True, "refine": 8}),
         ("refine 8, reach", {"preintegrate": True, "refine": 8, "refine_walk": "reach"}),
-        ("refine 12, reach", {"preintegrate": True, "refine": 12, "refine_walk": "reach"}))
+        ("refine 12, reach", {"preintegrate": True, "refine": 12, "refine_walk": "reach"}),
+        ("refine 2, crossings", {"preintegrate": True, "refine": 2, "refine_walk": "crossings"}),
+        ("refine 4, crossings", {"preintegrate": True, "refine": 4, "refine_walk": "crossings"}))
 
 
 REACH = {"preintegrate": True, "refine": 8, "refine_walk": "reach"}

@@ -21,7 +21,11 @@ Steps, each timed:
    tolerance picks for the same E (``Renderer.tolerance_settings``, no level choice):
    its time and its error against exact, and the bytes of samples each draws from.
 
-A JSON of every number goes to ``--out``."""
+A JSON of every number goes to ``--out``.
+
+``--per-brick [--brick-size N]``: only the per-brick choice (``per_brick=True``) against
+the one-level choice per E (``per_brick_rows``); ``--seams [--brick-size N]``: only bricks
+of two levels in a checkerboard against each level alone (``seam_rows``)."""
 
 import argparse
 import gzip
@@ -47,7 +51,16 @@ def main(argv=None):
     ap.add_argument("--tolerances", type=float, nargs="+", default=[0.06, 0.045, 0.03, 0.01])
     ap.add_argument("--size", type=int, default=128)
     ap.add_argument("--timing-size", type=int, default=512)
+    ap.add_argument("--per-brick", action="store_true",
+                    help="only the per-brick choice against the one-level choice (per_brick_rows)")
+    ap.add_argument("--brick-size", type=int, default=32)
+    ap.add_argument("--seams", action="store_true",
+                    help="only the seams check: bricks of two levels in a checkerboard against each alone")
     args = ap.parse_args(argv)
+    if args.per_brick:
+        return per_brick_rows(args)
+    if args.seams:
+        return seam_rows(args)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     import zarr
@@ -132,6 +145,128 @@ def main(argv=None):
     (out / "pyramid_numbers.json").write_text(json.dumps(record, indent=1))
     print(f"exact image at {args.size}x{args.size}: {record['exact_seconds']:.1f} s (0 when cached)")
     print(re.sub(r"\s+", " ", f"wrote {out / 'pyramid_numbers.json'}"))
+
+
+def per_brick_rows(args):
+    """Per E: the one-level choice and the per-brick choice (``per_brick=True``) on the
+    pyramid the command-line runs made, each against ``reference.exact`` of level 0 at
+    SIZE, the bricks per level, the bytes of samples a frame reads, and the frame time of
+    each at ``--timing-size`` (median of 3, the two interleaved, after one untimed frame)."""
+    import dvr_gl
+    from dvr_gl.formats.stores import open_store, pyramid_path
+    from dvr_gl.frontends.inputs import first_camera
+    from dvr_gl.model.transfer import load_tf_json
+    from dvr_gl.reference.exact import exact
+    from dvr_gl.formats.stores import build_pyramid
+    from dvr_gl.model.transfer import ct_8bit_preset, save_tf_json
+    from dvr_gl.rendering.pyramid import level_volume
+    from dvr_gl.techniques.brick_levels import BrickLevels
+    from dvr_gl.rendering.tolerance import median_seconds
+    import zarr
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    samples = np.frombuffer(gzip.open(os.path.join(args.data, *CHEST)).read(), np.uint8).reshape(SHAPE)
+    store = out / "chest.zarr"
+    if not store.exists():           # as main() writes them
+        array = zarr.create_array(str(store), shape=SHAPE, chunks=(64, 64, 64), dtype=np.uint8)
+        array[...] = samples
+    if not (out / "tf.json").exists():
+        save_tf_json(str(out / "tf.json"), ct_8bit_preset(dvr_gl.Volume(samples, spacing=SPACING)))
+    if not os.path.exists(pyramid_path(str(store))):
+        build_pyramid(str(store), spacing=SPACING)
+    volume = open_store(pyramid_path(str(store)))
+    tf = load_tf_json(str(out / "tf.json"))
+    camera = first_camera(volume)
+    scene = dvr_gl.Scene(volume, tf, camera, width=args.size, height=args.size, shading=True)
+    reference = exact(dvr_gl.Scene(dvr_gl.Volume(samples, spacing=SPACING), tf, camera, width=args.size,
+                                   height=args.size, shading=True))
+    big = scene.replace(width=args.timing_size, height=args.timing_size)
+    renderer = dvr_gl.Renderer()
+    rows = []
+
+    def rmse(image):
+        return float(np.sqrt(np.mean((np.asarray(image, np.float64) - reference) ** 2)))
+
+    for tolerance in args.tolerances:
+        single_image = renderer.render(scene, tolerance=tolerance)
+        single = renderer.last_choice
+        t0 = time.perf_counter()
+        image = renderer.render(scene, tolerance=tolerance, per_brick=True, brick_size=args.brick_size)
+        seconds = time.perf_counter() - t0
+        chosen = renderer.last_choice
+        level_scene = big.replace(volume=level_volume(volume, single.level))
+        single_frame = median_seconds(lambda: renderer.render(level_scene, step=single.step, **single.sampling),
+                                      repeats=1)
+        nz, ny, nx = single.level_shape
+        row = {"tolerance": tolerance, "single_level": single.level, "single_exact_rmse": rmse(single_image),
+               "single_frame_seconds": single_frame, "single_bytes": int(nx * ny * nz),
+               "mixed": chosen.mixed, "counts": list(chosen.counts), "bound": chosen.checked_rmse,
+               "exact_rmse": rmse(image), "choice_seconds": seconds, "step_voxels": chosen.step_voxels,
+               "trials": [[t, list(c), b] for t, c, b in chosen.trials]}
+        if chosen.mixed:     # a fresh drawer of the same levels: what one frame reads from the store
+            drawer = BrickLevels([level_volume(volume, k) for k in range(len(volume.levels))], dict(chosen.chosen))
+            frame_scene = big.replace(volume=level_volume(volume, 0))
+            options = dict(chosen.sampling, brick_size=args.brick_size, brick_levels=drawer)
+            renderer.render(frame_scene, step=chosen.step, **options)
+            row["mixed_store_bytes"] = int(drawer.cache.bytes_loaded)
+            row["mixed_texture_bytes_per_level"] = list(drawer.bytes)
+            # interleaved with the one-level frame: the machine's load moves both alike
+            mixed_times, single_times = [], []
+            for _ in range(3):
+                t1 = time.perf_counter()
+                renderer.render(frame_scene, step=chosen.step, **options)
+                mixed_times.append(time.perf_counter() - t1)
+                t1 = time.perf_counter()
+                renderer.render(level_scene, step=single.step, **single.sampling)
+                single_times.append(time.perf_counter() - t1)
+            row["frame_seconds"] = float(np.median(mixed_times))
+            row["single_frame_seconds"] = float(np.median(single_times))
+        rows.append(row)
+        print(json.dumps({k: v for k, v in row.items() if k != "trials"}), flush=True)
+        print("   trials (threshold, bricks per level, bound):",
+              "; ".join(f"{t:.3g} {tuple(c)} {b:.4f}" for t, c, b in chosen.trials), flush=True)
+    (out / "pyramid_per_brick.json").write_text(json.dumps({"brick_size": args.brick_size, "size": args.size,
+                                                            "timing_size": args.timing_size, "rows": rows}, indent=1))
+
+
+def seam_rows(args):
+    """The seams between levels: level 0's bricks (``--brick-size``) of two levels a and b
+    in a checkerboard, against every brick at a and every brick at b (the same passes and
+    step, 2 level-0 voxels), each against ``reference.exact`` at SIZE. A seam that lost or
+    doubled samples would put the checkerboard's error above both; it lies between them."""
+    import dvr_gl
+    from dvr_gl.formats.stores import open_store, pyramid_path
+    from dvr_gl.frontends.inputs import first_camera
+    from dvr_gl.model.transfer import load_tf_json
+    from dvr_gl.reference.exact import exact
+    from dvr_gl.rendering.pyramid import level_volume
+    from dvr_gl.techniques.bricks import partition
+    from dvr_gl.techniques.brick_levels import BrickLevels
+    out = Path(args.out)
+    samples = np.frombuffer(gzip.open(os.path.join(args.data, *CHEST)).read(), np.uint8).reshape(SHAPE)
+    volume = open_store(pyramid_path(str(out / "chest.zarr")))      # made by --per-brick or main()
+    tf = load_tf_json(str(out / "tf.json"))
+    camera = first_camera(volume)
+    scene = dvr_gl.Scene(level_volume(volume, 0), tf, camera, width=args.size, height=args.size, shading=True)
+    reference = exact(dvr_gl.Scene(dvr_gl.Volume(samples, spacing=SPACING), tf, camera, width=args.size,
+                                   height=args.size, shading=True))
+    levels = [level_volume(volume, k) for k in range(len(volume.levels))]
+    renderer = dvr_gl.Renderer()
+    step = 2 * volume.min_spacing
+    bricks = partition(volume.shape, args.brick_size, 0)
+    rows = []
+    for a in range(len(levels) - 1):
+        b = a + 1
+        errors = {}
+        for name, chosen in (("a", {}), ("b", {br.index: b for br in bricks}),
+                             ("checker", {br.index: (b if sum(br.index) % 2 else a) for br in bricks})):
+            drawer = BrickLevels(levels, chosen, default=a)
+            image = renderer.render(scene, step=step, brick_size=args.brick_size, brick_levels=drawer)
+            errors[name] = float(np.sqrt(np.mean((np.asarray(image, np.float64) - reference) ** 2)))
+        rows.append({"levels": [a, b], **errors})
+        print(f"levels {a}/{b}, bricks of {args.brick_size}: RMSE vs exact all {a} {errors['a']:.4f}, all {b} "
+              f"{errors['b']:.4f}, checkerboard {errors['checker']:.4f}", flush=True)
+    (out / f"pyramid_seams_{args.brick_size}.json").write_text(json.dumps(rows, indent=1))
 
 
 if __name__ == "__main__":

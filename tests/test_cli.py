@@ -590,8 +590,8 @@ def test_mesh_bench_quick_run(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "Shirley-Tuchman classification on the CPU" in out and "ball" in out
     rows = {r["renderer"]: r for r in csv.DictReader(open(tmp_path / "m.csv"))}
-    assert set(rows) == {"dvr_gl tetra mpvo", "dvr_gl tetra centroid", "dvr_gl tetra walk", "dvr_gl at VTK's error",
-                         "VTK projected tetrahedra"}
+    assert set(rows) == {"dvr_gl tetra mpvo", "dvr_gl tetra centroid", "dvr_gl tetra walk",
+                         "dvr_gl tetra walk, table segments", "dvr_gl at VTK's error", "VTK projected tetrahedra"}
     assert float(rows["dvr_gl tetra mpvo"]["rmse"]) < 1e-4
     assert float(rows["dvr_gl tetra mpvo"]["rmse"]) < float(rows["VTK projected tetrahedra"]["rmse"])
     assert float(rows["dvr_gl tetra mpvo"]["ms_median"]) > 0
@@ -601,7 +601,7 @@ def test_mesh_bench_quick_run(tmp_path, capsys):
     assert float(at_vtk["rmse"]) <= float(at_vtk["tolerance"]) and at_vtk["chosen"] in out
     assert float(at_vtk["pilot_ms"]) > 0 and float(at_vtk["ms_median"]) > 0
     doc = json.load(open(tmp_path / "m.json"))
-    assert doc["info"]["cpu_classify_ms"]["ball"] > 0 and len(doc["rows"]) == 5
+    assert doc["info"]["cpu_classify_ms"]["ball"] > 0 and len(doc["rows"]) == 6
     assert (tmp_path / "m.png").stat().st_size > 0
 
 

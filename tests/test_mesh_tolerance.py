@@ -243,3 +243,36 @@ def test_bad_shapes_are_named():
         mesh_grid.resample_to_grid(np.zeros((4, 4, 4)), (4, 4, 4))
     with pytest.raises(ValueError, match="samples"):
         mesh_grid.grid_shape(mesh, 1)
+
+
+# --------------------------------------------------------------------- the grown boundary
+def test_the_grown_boundary_extends_a_linear_field_by_one_sample():
+    """Each outside sample next to the domain along an axis takes the linear field
+    extrapolated from inside (exactly, for a linear field); inside samples keep their
+    values, samples two away stay outside."""
+    z, y, x = np.mgrid[0:6, 0:7, 0:8].astype(np.float32)
+    linear = 1.0 + 2.0 * x + 3.0 * y + 5.0 * z
+    values = np.full(linear.shape, np.nan, np.float32)
+    values[2:4, 2:5, 2:6] = linear[2:4, 2:5, 2:6]
+    grown = mesh_tolerance.grow_boundary(Volume(values, mask_nonfinite=True)).data
+    assert np.array_equal(grown[2:4, 2:5, 2:6], values[2:4, 2:5, 2:6])
+    added = np.isfinite(grown) & ~np.isfinite(values)
+    assert added.sum() == 2 * (3 * 4 + 2 * 4 + 2 * 3)               # the six faces of the block
+    assert np.allclose(grown[added], linear[added], atol=1e-5)
+    assert not np.isfinite(grown[0]).any() and not np.isfinite(grown[:, :, 0]).any()
+
+
+def test_the_grown_grid_is_closer_to_exact_on_a_non_convex_mesh(renderer):
+    """The plain grid's domain is up to a cell smaller than the mesh's, and that is most
+    of its error at a curvilinear mesh's walls; grown by one sample the grid is measured
+    closer to exact (blunt fin, 48 samples: 1.6e-2 to 1.0e-2; the combustor and the LOX
+    post: 2x, docs/notes/mesh_tolerance.md). (On the bundled ball the TF hides the cells
+    at the boundary, and the two grids give the same image.)"""
+    mesh, tf = _bluntfin()
+    scene = _scene(mesh, tf)
+    exact = reference.exact(scene)
+    shape = mesh_grid.grid_shape(mesh, 48)
+    plain = mesh_grid.resample_to_grid(mesh, shape)
+    errors = [metrics.compare(renderer.render(scene.replace(volume=v), "raycast", step=v.min_spacing), exact)["rmse"]
+              for v in (plain, mesh_tolerance.grow_boundary(plain))]
+    assert errors[1] < 0.8 * errors[0], errors

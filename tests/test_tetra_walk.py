@@ -87,6 +87,26 @@ def test_non_convex_meshes_are_peeled(renderer):
         assert plan.walk_passes in layers and plan.walk_left == 0
 
 
+def test_layers_drawn_without_their_counts_change_nothing(renderer):
+    """A frame draws as many layers as the last one did without reading their entry
+    counts: after a view of two layers, a view of one (its second layer drawn without
+    entries) and then a view of two again give, bit for bit, the images drawn alone."""
+    cells = [(0, 0, 0), (3, 0, 2)]
+    near = Camera((4.5, 3.5, 4.0), (1.0, 0.8, 0.5), fov=35)
+    behind = Camera((9.5, 0.5, 6.5), (0.5, 0.5, 0.5), fov=20)       # along the line through both
+    mesh = blocks_mesh(cells)
+    alone = {}
+    for name, cam in (("near", near), ("behind", behind)):
+        with dvr_gl.Renderer() as fresh:
+            alone[name] = walk(fresh, Scene(blocks_mesh(cells), TF, cam, 40, 40))
+    _, first = walk(renderer, Scene(mesh, TF, behind, 40, 40))
+    img_near, plan_near = walk(renderer, Scene(mesh, TF, near, 40, 40))
+    img_behind, _ = walk(renderer, Scene(mesh, TF, behind, 40, 40))
+    assert first.walk_passes == 2 and alone["near"][1].walk_passes == 1 and plan_near.walk_passes == 2
+    assert np.array_equal(img_near, alone["near"][0]) and np.array_equal(img_behind, alone["behind"][0])
+    assert alone["behind"][0][..., 3].max() > 0.3
+
+
 def test_the_pass_cap_counts_what_it_leaves(renderer, monkeypatch):
     """With one layer allowed, the block behind is not walked: the image is the front
     block's alone, and the pixels that still had an entry are counted."""
@@ -161,6 +181,20 @@ def test_folded_cells_are_walked_as_their_union(renderer):
         assert img[..., 3].max() > 0.2
         steps, guarded = tetra_walk.walk_counts(renderer, plan)
         assert guarded == 0 and steps.max() <= 4
+
+
+def test_the_rare_paths_are_compiled_in_where_the_mesh_has_them():
+    """walk.frag's code for zero-volume cells and folded faces costs every step on
+    llvmpipe (both sides of a per-pixel branch run), so it is compiled in per mesh: the
+    cube has neither, the tests above (a flat cell, a folded pair) each one."""
+    cube = cube_mesh(SIX)
+    assert tetra_walk.rare_paths(cube) == {"WALK_FLAT": 0, "WALK_FOLDS": 0}
+    flat = TetMesh(np.vstack([cube.points, [[0.5, 0.25, 0.0]]]), np.vstack([cube.tets, [[0, 1, 3, 8]]]),
+                   np.concatenate([cube.scalars, [0.5]]))
+    assert tetra_walk.rare_paths(flat) == {"WALK_FLAT": 1, "WALK_FOLDS": 0}
+    pts = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [0.2, 0.25, 0.3]], float)
+    folded = TetMesh(pts, np.array([[0, 1, 2, 3], [1, 2, 3, 4]]), np.full(5, 0.5))
+    assert tetra_walk.rare_paths(folded) == {"WALK_FLAT": 0, "WALK_FOLDS": 1}
 
 
 def _ball(view="perspective", mode="composite", size=48, **extra):

@@ -117,14 +117,17 @@ def test_a_narrow_tf_feature_is_pre_integrated(renderer):
 
 
 def test_each_way_of_sampling_is_timed_and_the_fastest_taken(renderer):
-    """On a narrow spike all three ways apply (plain, pre-integrated, refined); the one
+    """On a narrow spike all four ways apply (plain, pre-integrated, refined, walked by
+    crossings, the values with opacity being a narrow share of the data's); the one
     taken is the way ``fastest`` picked among the timed choices (its own rules are tested
     below), at no longer a step (the check on the request's view may shorten it), it
     carries its frame time, and it meets the tolerance on the image. The caller's say is
     kept, untimed."""
     scene = spike_scene()
     ways = tolerance.samplings(scene)
-    assert [(w["preintegrate"], w["refine"]) for w in ways] == [(False, 1), (True, 1), (True, tolerance.REFINE_PARTS)]
+    assert [(w["preintegrate"], w["refine"], w.get("refine_walk", "even")) for w in ways] == [
+        (False, 1, "even"), (True, 1, "even"), (True, tolerance.REFINE_PARTS, "even"),
+        (True, tolerance.REFINE_PARTS, "crossings")]
     picked = []
     original = tolerance.fastest
 

@@ -23,7 +23,8 @@ that ``tetra`` does on the GPU (printed after the table, in the JSON info).
 
 Renderers: dvr_gl ``tetra`` with ``sort="mpvo"``, with ``sort="centroid"`` and with
 ``sort="walk"`` (no sort: each pixel's ray walked cell to cell on the GPU, its ``sort ms``
-is the plan's CPU time; ``passes`` its layers of depth peeling), and VTK's
+is the plan's CPU time; ``passes`` its layers of depth peeling), the walk with
+table-integrated segments (``segments="table"``, approximate: ``model.segment_table``), and VTK's
 projected tetrahedra (its default cell-centre depth sort); VTK is left out when it is
 not installed. ``t/VTK`` and ``err/VTK`` divide by VTK's row of the same data set.
 
@@ -51,6 +52,9 @@ CSV_FIELDS = ["dataset", "tets", "drawn", "renderer", "width", "sort_ms", "draw_
               "error_size", "rmse", "max_abs", "psnr", "time_vs_vtk", "rmse_vs_vtk", "cycles_broken",
               "gap_constraints", "walk_passes", "tolerance", "chosen", "pilot_ms", "pilot_rmse"]
 TOLERANCE_ROW = "dvr_gl at VTK's error"
+# the tetra rows: key -> make_plan options
+TETRA_ROWS = {"mpvo": {"sort": "mpvo"}, "centroid": {"sort": "centroid"}, "walk": {"sort": "walk"},
+              "walk table": {"sort": "walk", "segments": "table"}}
 
 
 def _render_choice(gl, scene, choice):
@@ -81,7 +85,7 @@ def _time_interleaved(gl, scene, sorts, repeats, on_frame, tolerance=None, vtk=N
         s = scene.replace(camera=_camera(scene.volume, 0.5 * (i + 1)))
         for sort in sorts:
             t0 = time.perf_counter()
-            plans[sort] = plan = tetra.make_plan(s, sort=sort, tables=gl.tables)
+            plans[sort] = plan = tetra.make_plan(s, tables=gl.tables, **TETRA_ROWS[sort])
             t1 = time.perf_counter()
             with _current(gl):
                 gl.read_target(tetra.draw(gl, plan), s.width, s.height)
@@ -144,7 +148,8 @@ def run_mesh(args, err=None):
             peer = None
             vtk_note = f"VTK not available ({e}); VTK rows skipped"
             print(f"dvr-gl bench: {vtk_note}", file=err)
-    renderers = [("dvr_gl tetra mpvo", "mpvo"), ("dvr_gl tetra centroid", "centroid"), ("dvr_gl tetra walk", "walk")]
+    renderers = [("dvr_gl tetra mpvo", "mpvo"), ("dvr_gl tetra centroid", "centroid"), ("dvr_gl tetra walk", "walk"),
+                 ("dvr_gl tetra walk, table segments", "walk table")]
     if peer is not None:
         renderers += [(TOLERANCE_ROW, "tolerance"), ("VTK projected tetrahedra", "vtk")]
     frames = 1 + args.repeats
@@ -196,12 +201,12 @@ def run_mesh(args, err=None):
                                        pilot_rmse=choice.pilot_rmse)
                     else:
                         last, ts, td, times = timed[sort]
-                        image = gl.render(small, technique="tetra", sort=sort)
+                        image = gl.render(small, technique="tetra", **TETRA_ROWS[sort])
                         from ..techniques import tetra
-                        plan = tetra.make_plan(scene, sort=sort, tables=gl.tables)
+                        plan = tetra.make_plan(scene, tables=gl.tables, **TETRA_ROWS[sort])
                         row.update(sort_ms=1e3 * ts, draw_ms=1e3 * td, cycles_broken=plan.order.cycles_broken,
                                    gap_constraints=plan.order.gap_constraints, drawn=int(plan.draw.size),
-                                   walk_passes=last.walk_passes if sort == "walk" else None)
+                                   walk_passes=last.walk_passes if last.sort == "walk" else None)
                     e = compare(image, exact)
                     progress.advance(f"{name}: {label} error")
                     row.update(dataset=name, tets=mesh.n_tets, renderer=label, width=args.size,
@@ -246,7 +251,8 @@ def figure_png(rows, info) -> bytes:
     fig = Figure(figsize=(6.5, 4.5), constrained_layout=True)
     ax = fig.subplots()
     markers = {"dvr_gl tetra mpvo": ("tab:blue", "o"), "dvr_gl tetra centroid": ("tab:green", "s"),
-               "dvr_gl tetra walk": ("tab:purple", "D"), TOLERANCE_ROW: ("tab:orange", "*"),
+               "dvr_gl tetra walk": ("tab:purple", "D"), "dvr_gl tetra walk, table segments": ("tab:pink", "d"),
+               TOLERANCE_ROW: ("tab:orange", "*"),
                "VTK projected tetrahedra": ("tab:red", "^")}
     for label, (color, marker) in markers.items():
         pts = [(r["ms_median"], r["rmse"], r["dataset"]) for r in rows if r["renderer"] == label]

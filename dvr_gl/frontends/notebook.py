@@ -28,6 +28,12 @@ from .notebook_scene import CONTROLS_CSS, CONTROLS_JS, SceneCuts, load_surfaces,
 from .images import DEFAULT_BACKGROUND, RenderedImage, png_bytes  # noqa: F401 (RenderedImage: documented here)
 from .. import formats as dvr_io
 from ..model.layers import BLENDS
+from ..rendering.pyramid import moving_volume, MOVING_SAMPLES
+
+
+def has_pyramid_levels(data):
+    """Whether ``data`` is a volume with pyramid levels (a multiscale store)."""
+    return len(getattr(data, "levels", ()) or ()) > 1
 
 try:
     import anywidget
@@ -242,6 +248,7 @@ if anywidget is not None:
         volume_names = traitlets.List().tag(sync=True)
         blend = traitlets.Unicode("").tag(sync=True)
         blends = traitlets.List().tag(sync=True)
+        moving_samples = MOVING_SAMPLES   # a pyramid's level while dragging: the finest this small
 
         def __init__(self, source, *, tf=None, technique=None, size=384, azimuth=None, elevation=None,
                      zoom=1.0, background=DEFAULT_BACKGROUND, clip_planes=(), crop_box=None, geometry=(),
@@ -267,7 +274,10 @@ if anywidget is not None:
             if self._surfaces and self._cannot_draw(technique, True, False):
                 raise dvr_io.InputError("geometry", f"is drawn by technique {', '.join(_common().GEOMETRY_TECHNIQUES)}"
                                                     f", not {technique}")
-            presets = inputs.suitable_presets(data) if volumes is None or not volumes.channels else []
+            if volumes is None and inputs._is_lazy(data):     # a store: presets would read every sample
+                presets = ["auto"]
+            else:
+                presets = inputs.suitable_presets(data) if volumes is None or not volumes.channels else []
             if default_preset not in presets:
                 presets.insert(0, default_preset)
             preset = default_preset if tf is None else tf
@@ -436,6 +446,14 @@ if anywidget is not None:
                 data, tf, shown = self._data, self._tf_for(self.preset), {}
                 if self._volumes is not None:          # the volumes shown: the first is the scene's own
                     data, tf, shown = self._volumes.scene(tf)
+                elif view.get("coarse") and self.technique == "raycast" and has_pyramid_levels(data):
+                    # a multiscale store while dragging: one coarse level (rendering.pyramid), its
+                    # step as many of its voxels; the still frame goes back to the data (and tolerance)
+                    level = moving_volume(data, self.moving_samples)
+                    options = {k: v for k, v in options.items() if k != "tolerance"}
+                    if options.get("step") is not None:
+                        options["step"] = options["step"] * level.min_spacing / data.min_spacing
+                    data = level
                 image = inputs.render(data, tf=tf, technique=self.technique, size=(width, height),
                                       azimuth=float(view["azimuth"]), elevation=float(view["elevation"]),
                                       zoom=float(view["zoom"]), **scene, **shown, **options)

@@ -259,8 +259,9 @@ def add_render_options(r):
                    help="raycast with --preintegrate: cut segments that may cross a bend of the TF's "
                         "opacity into K parts and at cell faces (adaptive sampling; default: 1, none)")
     r.add_argument("--brick-size", type=whole_number(1), metavar="N",
-                   help="raycast: draw the volume in bricks of N cells a side, one texture each (the same "
-                        "image to float rounding; default: bricks only where a side exceeds one 3-D texture)")
+                   help="raycast, slice3d: draw the volume in bricks of N cells a side, one texture each "
+                        "(particles, splat: made brick by brick; the same image to float rounding; default: "
+                        "bricks only where a side exceeds one 3-D texture)")
     r.add_argument("--memory", type=_memory_size, metavar="SIZE",
                    help="raycast of a store (zarr, HDF5): bytes of bricks held at once, e.g. 2GB or 512MiB "
                         "(default: a quarter of the memory available)")
@@ -415,7 +416,7 @@ TECHNIQUE_OPTIONS = {"interpolate": ("slice2d",), "proxy": ("slice3d",), "shells
                      "repetitions": ("particles",), "seed": ("particles",), "radius": ("particles", "splat"),
                      "sampler": ("particles",), "density": ("splat",), "cutoff": ("splat",), "kernel": ("splat",),
                      "gradients": ("raycast", "slice2d", "slice3d"), "tolerance": ("raycast", "tetra"),
-                     "brick_size": ("raycast",), "memory": ("raycast",)}
+                     "brick_size": ("raycast", "slice3d", "particles", "splat"), "memory": ("raycast",)}
 
 #: the techniques that render meshes (cell projection); the others render grid volumes
 MESH_TECHNIQUES = ("tetra",)

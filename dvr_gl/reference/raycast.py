@@ -170,6 +170,9 @@ def render_plan(plan, lut_exact=False):
     if isinstance(plan, LayersPlan):      # several volumes: their own twin
         from .raycast_layers import render_plan as render_layers
         return render_layers(plan, lut_exact=lut_exact)
+    if getattr(plan, "crossings", None) is not None:      # refine_walk="crossings": its own twin
+        from .crossing_walk import render_plan as render_crossings
+        return render_crossings(plan)
     scene = plan.scene
     volume, tf = scene.volume, scene.tf
     H, W = scene.height, scene.width

@@ -79,7 +79,10 @@ def render_plan(plan, lut_exact=False):
     length = (seg["t1"] - seg["t0"])[order]
     terms = sample_terms(scene, None)
     model = scene.optical_model
-    if terms is None:
+    if plan.defines.get("SEGMENT_TABLE"):     # segments="table": the walk's approximate integral
+        from ..model.segment_table import SegmentTable, table_segment
+        rgba = table_segment(SegmentTable(scene.tf), seg["s0"][order], seg["s1"][order], length)
+    elif terms is None:
         rgba = linear_segment(plan.knots, seg["s0"][order], seg["s1"][order], length, model)
     else:   # each cell's terms are constant (its gradient is): see shaders/tetra/tetra.frag
         from ..model.mesh import cell_fields

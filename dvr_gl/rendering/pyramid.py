@@ -24,10 +24,18 @@ tolerance's machinery (``rendering.tolerance``):
    tolerance chooses for ``E`` (``tolerance.settings``, checked against the same
    reference).
 
-One level serves the whole image; choosing a level per brick is not done yet. What was
-chosen is a :class:`LevelChoice` on ``Renderer.last_choice``; the choice is kept per view,
-volume, TF, options and ``E`` in the renderer's tolerance store, so asking again costs
-nothing.
+One level serves the whole image. What was chosen is a :class:`LevelChoice` on
+``Renderer.last_choice``; the choice is kept per view, volume, TF, options and ``E`` in
+the renderer's tolerance store, so asking again costs nothing.
+
+A level per brick (``per_brick=True``; ``rendering.pyramid_bricks``): level
+0's bricks are each drawn from a level of their own in one frame
+(``techniques.brick_levels.BrickLevels``), the coarsest whose share of the error keeps
+the image within ``E``, measured against the same reference.
+
+While a view moves, the viewer and the notebook widget draw one coarse level
+(:func:`moving_level`, from the levels' shapes alone) and refine to level 0, or to the
+choice for their tolerance, once it is still.
 """
 
 from __future__ import annotations
@@ -175,15 +183,20 @@ def settings(renderer, scene, tolerance, technique="raycast", options=None):
     return level_scene, chosen.step, dict(options, **chosen.sampling), chosen
 
 
+def _reference(renderer, scene0, tolerance, technique, options, sampling):
+    """(level 0's reference of the check view, whether the check samples the request)."""
+    pilot = tol.pilot_renderer(renderer, technique, options, sampling, ert_transmittance=0.0)
+    model = renderer._error_models.get(tol.model_key(scene0, options, sampling), lambda: tol.measure(pilot, scene0))
+    reference = tol.reference_for(renderer, scene0, tolerance, technique, options, model.order, sampling)
+    check = reference.scene
+    return reference, (check.width, check.height) != (scene0.width, scene0.height)
+
+
 def _choose(renderer, scene0, tolerance, technique, options, sampling, fixed):
     t0 = time.perf_counter()
     volume = scene0.volume
-    models = renderer._error_models
-    pilot = tol.pilot_renderer(renderer, technique, options, sampling, ert_transmittance=0.0)
-    model = models.get(tol.model_key(scene0, options, sampling), lambda: tol.measure(pilot, scene0))
-    reference = tol.reference_for(renderer, scene0, tolerance, technique, options, model.order, sampling)
+    reference, sampled = _reference(renderer, scene0, tolerance, technique, options, sampling)
     check = reference.scene
-    sampled = (check.width, check.height) != (scene0.width, scene0.height)
     target = tol.CHECK_TARGET * tolerance
     render = tol.pilot_renderer(renderer, technique, options, sampling)
     trials = []
@@ -216,3 +229,23 @@ def render(renderer, scene, tolerance, technique="raycast", **options):
     image = renderer.render(level_scene, technique, step=step, **options)
     renderer.last_choice = chosen
     return image
+
+
+MOVING_SAMPLES = 2 ** 21     # samples (128^3) of the level a moving view draws from
+
+
+def moving_level(volume, samples=MOVING_SAMPLES):
+    """The level the viewer and the notebook widget draw while the view moves: the finest
+    with at most ``samples`` samples (the coarsest where none is so small), chosen once
+    from the levels' shapes alone; 0 for a volume without levels."""
+    levels = getattr(volume, "levels", ()) or ()
+    if len(levels) < 2:
+        return 0
+    small = [k for k, level in enumerate(levels) if int(np.prod(level.shape, dtype=np.int64)) <= samples]
+    return small[0] if small else len(levels) - 1
+
+
+def moving_volume(volume, samples=MOVING_SAMPLES):
+    """``volume``'s level :func:`moving_level` as a volume (``volume`` itself without levels)."""
+    index = moving_level(volume, samples)
+    return volume if index == 0 else level_volume(volume, index)

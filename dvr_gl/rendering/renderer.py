@@ -137,8 +137,10 @@ class Renderer:
             if scene.is_mesh:
                 scene, technique, step, options = self.mesh_tolerance_settings(scene, tolerance, technique, **options)
             elif len(getattr(scene.volume, "levels", ()) or ()) > 1 and not scene.layers:   # a pyramid: its level
-                from . import pyramid
-                scene, step, options, self.last_choice = pyramid.settings(self, scene, tolerance, technique, options)
+                from . import pyramid, pyramid_bricks       # (per_brick=True: a level per brick)
+                choose = pyramid_bricks.brick_settings if options.get("per_brick") else pyramid.settings
+                scene, step, options, self.last_choice = choose(self, scene, tolerance, technique,
+                                                                {k: v for k, v in options.items() if k != "per_brick"})
             else:
                 step, chosen = self.tolerance_settings(scene, tolerance, technique, **options)
                 options = dict(options, **chosen)
@@ -242,8 +244,13 @@ class Renderer:
         if self._released:
             raise RuntimeError("this Renderer has been released")
         tech = get_technique(technique)
+        levels = options.get("brick_levels")     # a pyramid's per-brick levels (rendering.pyramid_bricks)
+        if levels is not None:
+            options = {k: v for k, v in options.items() if k != "brick_levels"}
         check_options(technique, options)
         plan = tech.make_plan(scene, step, tables=self.tables, **options)
+        if levels is not None:
+            plan.brick_levels = levels
         # a compute pass may store the image's rows top down when it is read back next
         # (gpu.draw_ray_compute): read_target then needs no flip
         self.rows_top_down_wanted, self.top_down_target = read_back, None

@@ -23,7 +23,9 @@ step chosen again (``verified``), since the error between the pilot's octaves is
 smooth in the step.
 Unless the caller says ``preintegrate=``, ``refine=`` or ``refine_walk=``, further pilots measure
 pre-integrated segments and, where the TF has detail within reach of the data, refined
-pre-integrated segments (``refine=REFINE_PARTS``): a narrow TF feature needs very short
+pre-integrated segments (``refine=REFINE_PARTS``; and walked by crossings,
+``techniques.crossing_walk``, where the values with opacity are a narrow share of the
+data's): a narrow TF feature needs very short
 plain steps but not pre-integrated ones, and refined ones spend their samples only where
 it is crossed. Each way's choice is then rendered at up to ``TIMING_SIDE`` pixels a side
 (median of ``TIMING_REPEATS``) and the fastest is taken, if it beats the one the step
@@ -117,9 +119,12 @@ PLAIN = {"preintegrate": False, "refine": 1}
 
 def samplings(scene):
     """The ways of sampling a tolerance request weighs for ``scene``: plain midpoint
-    samples; pre-integrated segments where they apply; and refined ones where the TF has
-    detail that the data's values can reach."""
+    samples; pre-integrated segments where they apply; refined ones where the TF has
+    detail that the data's values can reach; and, where besides the values with opacity
+    are a narrow share of the data's (``crossing_walk.narrow_opacity``), refined ones
+    walked by crossings."""
     from ..techniques.common import preintegration_applies
+    from ..techniques.crossing_walk import narrow_opacity
     from ..techniques.raycast import detail_knots
     ways = [dict(PLAIN)]
     if preintegration_applies(scene):
@@ -128,6 +133,8 @@ def samplings(scene):
         knots = detail_knots(scene.tf)
         if np.any((knots > lo - (hi - lo)) & (knots < hi + (hi - lo))):
             ways.append({"preintegrate": True, "refine": REFINE_PARTS})
+            if narrow_opacity(scene):   # the walk by crossings, measured like the others
+                ways.append({"preintegrate": True, "refine": REFINE_PARTS, "refine_walk": "crossings"})
     return ways
 
 

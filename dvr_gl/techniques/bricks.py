@@ -370,12 +370,17 @@ def draw(renderer, plan, prog, textures, brick_size):
     cull_for_proxy(ctx, kind)
     textures_of = (brick_textures(renderer, volume) if plan.lazy is None
                    else lazy_textures(renderer, volume, plan.lazy.memory, filter_is_exact(renderer)))
+    levels = getattr(plan, "brick_levels", None)   # bricks of several pyramid levels (brick_levels.BrickLevels)
     for brick in order:
-        tex, offset = textures_of.get(brick)
+        placement = brick_uniforms(volume, brick)
+        if levels is None:
+            tex, offset = textures_of.get(brick)
+        else:
+            tex, offset, placement = levels.get(renderer, brick, halo_for(scene), placement)
         tex.use(location=unit_volume)
         if "u_brick_offset" in prog:
             prog["u_brick_offset"].value = offset
-        for name, value in brick_uniforms(volume, brick).items():
+        for name, value in placement.items():
             if name in prog:        # (u_brick_texels: not where the shader interpolates fetches)
                 prog[name].value = value
         mvp = brick_proxy(scene, brick, kind, view_proj, grow).astype("f4").tobytes()
@@ -390,6 +395,8 @@ def draw(renderer, plan, prog, textures, brick_size):
         running.use()
         copy_vao.render()
     ctx.disable(ctx.CULL_FACE)
+    if levels is not None:
+        levels.release()
     if scene.mode == "composite" and TARGETS[plan.target] == "f4":
         return running
     out = cleared_target(renderer, scene, plan.target)   # the running image in the plan's format ...

@@ -34,6 +34,11 @@ accepted with ``min(1, tau' / tau)``), so positions follow ``tau`` within the ce
 are biased where ``tau`` is not linear over a cell (the corner average is not the cell's
 integral); docs/guide/particles.md reports by how much.
 
+A grid's particles are made per tile of ``GENERATION_TILE`` cells a side, each tile with
+its own random stream (keyed by seed, repetition and the tile's index) and its own
+samples, so that bricks, which make the tiles they hold, make the same particles
+(``point_bricks``). A mesh's come from one stream.
+
 Opacity 1 is infinite extinction; it is capped at ``alpha = 1 - 1e-6`` (``TAU_CAP``), a
 transmittance of 1e-6 per unit distance.
 """
@@ -119,11 +124,19 @@ def candidate_count(data, tf, radius):
 
 
 def generate(data, tf, radius, seed=0, repetition=0, sampler="rejection"):
-    """One particle set for a Volume or a TetMesh, reproducible from (seed, repetition)."""
+    """One particle set for a Volume or a TetMesh, reproducible from (seed, repetition).
+    A grid's is made tile by tile (``grid_tiles``), each tile from its own random stream,
+    so that bricks (``generate_bricks``) make the very same particles."""
     if sampler not in SAMPLERS:
         raise ValueError(f"sampler must be one of {', '.join(SAMPLERS)}, got {sampler!r}")
     if not (isinstance(radius, (int, float)) and math.isfinite(radius) and radius > 0):
         raise ValueError(f"radius must be a positive number (world units), got {radius!r}")
+    if not hasattr(data, "tets"):
+        check_budget(data, tf, radius)
+        values = _cells(data).values
+        parts = [tile_particles(values, (0, 0, 0), tile, data, tf, radius, seed, repetition, sampler)
+                 for tile in grid_tiles(data.shape)]
+        return join_sets(parts, tf)
     rng = np.random.default_rng([int(seed), int(repetition)])
     cells = _cells(data)
     area = math.pi * radius ** 2
@@ -135,28 +148,152 @@ def generate(data, tf, radius, seed=0, repetition=0, sampler="rejection"):
         mean = np.concatenate([extinction(tf, cells.corners(emitting[i:i + _CELL_CHUNK])).mean(axis=1)
                                for i in range(0, emitting.size, _CELL_CHUNK)] or [np.zeros(0)])
         mean = mean * cells.volume[emitting] / area
-    if mean.sum() > MAX_PARTICLES:
-        raise ValueError(f"radius={radius!r} needs about {mean.sum():.3g} particle candidates per set "
-                         f"(at most {MAX_PARTICLES:,}): use a larger radius or a smaller image")
+    check_count(mean.sum(), radius)
     points, scalars, owners, candidates = [], [], [], 0
     for start in range(0, emitting.size, _CELL_CHUNK):
         owner = np.repeat(emitting[start:start + _CELL_CHUNK], rng.poisson(mean[start:start + _CELL_CHUNK]))
         candidates += owner.size
-        p, s = cells.place(owner, rng)
-        if sampler == "rejection":
-            keep = rng.random(owner.size) * tau_max[owner] < extinction(tf, s)
-            p, s, owner = p[keep], s[keep], owner[keep]
-        elif sampler == "metropolis":
-            p, s = _metropolis(cells, owner, p, s, tf, rng)
+        p, s, owner = _thin(cells, owner, tf, tau_max, sampler, rng)
         points.append(p.astype(np.float32))
         scalars.append(s.astype(np.float32))
         owners.append(owner)
-    if not points:
-        points, scalars, owners = [np.zeros((0, 3), np.float32)], [np.zeros(0, np.float32)], [np.zeros(0, np.int64)]
+    part = Part(points, scalars, owners, candidates, int(emitting.size))
+    return join_sets([part], tf)
+
+
+def check_count(candidates, radius):
+    if candidates > MAX_PARTICLES:
+        raise ValueError(f"radius={radius!r} needs about {candidates:.3g} particle candidates per set "
+                         f"(at most {MAX_PARTICLES:,}): use a larger radius or a smaller image")
+
+
+def check_budget(data, tf, radius):
+    """A grid's candidates per set (their largest count, ``candidate_count``) within
+    MAX_PARTICLES, else a ValueError naming the radius."""
+    check_count(candidate_count(data, tf, radius), radius)
+
+
+def _thin(cells, owner, tf, tau_max, sampler, rng):
+    """Candidates placed uniformly in their cells, then thinned (rejection) or moved
+    (metropolis); (points, scalars, owners) of the particles kept."""
+    p, s = cells.place(owner, rng)
+    if sampler == "rejection":
+        keep = rng.random(owner.size) * tau_max[owner] < extinction(tf, s)
+        p, s, owner = p[keep], s[keep], owner[keep]
+    elif sampler == "metropolis":
+        p, s = _metropolis(cells, owner, p, s, tf, rng)
+    return p, s, owner
+
+
+@dataclass
+class Part:
+    """A piece of a set (a tile's, or a mesh's whole): lists of arrays, joined once."""
+    points: list
+    scalars: list
+    owners: list
+    candidates: int
+    cells: int
+
+
+def join_sets(parts, tf):
+    """One ParticleSet of the pieces ``parts`` (``Part`` or ParticleSet), in order; the
+    colours made once, from the scalars (the exact TF's)."""
+    points, scalars, owners = [np.zeros((0, 3), np.float32)], [np.zeros(0, np.float32)], [np.zeros(0, np.int64)]
+    candidates = cells = 0
+    for part in parts:
+        if isinstance(part, ParticleSet):
+            points.append(part.points), scalars.append(part.scalars), owners.append(part.owners)
+        else:
+            points += part.points
+            scalars += part.scalars
+            owners += part.owners
+        candidates += part.candidates
+        cells += part.cells
     scalars = np.concatenate(scalars)
     colors = tf.color(scalars.astype(np.float64)).reshape(-1, 3).astype(np.float32)
-    return ParticleSet(np.concatenate(points), scalars, colors, candidates, int(emitting.size),
-                       np.concatenate(owners))
+    return ParticleSet(np.concatenate(points), scalars, colors, candidates, cells, np.concatenate(owners))
+
+
+# ----------------------------------------------------------------------------- grids, tile by tile
+
+GENERATION_TILE = 32     # a grid's particles are made per tile of this many cells a side
+
+
+def grid_tiles(shape, box=None):
+    """The generation tiles of a grid of ``shape`` (nz, ny, nx) samples, each
+    ((z0, z1), (y0, y1), (x0, x1)) half-open in cells, z slowest; with ``box`` (the same
+    form) only those that meet it."""
+    cells = [max(n - 1, 1) for n in shape]
+    ranges = []
+    for axis, c in enumerate(cells):
+        lo, hi = (0, c) if box is None else box[axis]
+        first = lo // GENERATION_TILE * GENERATION_TILE
+        ranges.append([(t, min(t + GENERATION_TILE, c)) for t in range(first, hi, GENERATION_TILE)])
+    return [(z, y, x) for z in ranges[0] for y in ranges[1] for x in ranges[2]]
+
+
+def tile_particles(values, offset, tile, data, tf, radius, seed, repetition, sampler):
+    """The particles of the cells of ``tile``, from its own random stream (keyed by seed,
+    repetition and the tile's index) and its samples alone: ``values`` (float64) holds
+    them, its first sample being the volume's ``offset`` (z, y, x). The same whichever
+    array holds the samples: every position is the tile's cell index plus a fraction,
+    times the spacing, in float64, and every value is interpolated from the same corners."""
+    (z0, z1), (y0, y1), (x0, x1) = tile
+    oz, oy, ox = offset
+    v = values[z0 - oz:z1 + 1 - oz, y0 - oy:y1 + 1 - oy, x0 - ox:x1 + 1 - ox]
+    nz, ny, nx = z1 - z0, y1 - y0, x1 - x0
+    eight = [v[z:z + nz, y:y + ny, x:x + nx] for z in (0, 1) for y in (0, 1) for x in (0, 1)]
+    lo = np.minimum.reduce(eight).ravel()
+    hi = np.maximum.reduce(eight).ravel()
+    volume = np.full(lo.size, float(np.prod(data.spacing)))
+    if data.cell_valid is not None:
+        volume[~data.cell_valid[z0:z1, y0:y1, x0:x1].ravel()] = 0.0
+    tau_max = max_extinction(tf, lo, hi)
+    emitting = np.flatnonzero((tau_max > 0) & (volume > 0))
+    if emitting.size == 0:
+        return Part([], [], [], 0, 0)
+    cells = _block_cells(v, (z0, y0, x0), data.spacing)
+    area = math.pi * radius ** 2
+    if sampler == "rejection":
+        mean = tau_max[emitting] * volume[emitting] / area
+    else:                       # the classic estimate: tau at the corners, averaged
+        mean = extinction(tf, cells.corners(emitting)).mean(axis=1) * volume[emitting] / area
+    T = GENERATION_TILE
+    rng = np.random.default_rng([int(seed), int(repetition), z0 // T, y0 // T, x0 // T])
+    owner = np.repeat(emitting, rng.poisson(mean))
+    candidates = owner.size
+    p, s, owner = _thin(cells, owner, tf, tau_max, sampler, rng)
+    k, rem = np.divmod(owner, ny * nx)          # the tile's cell index to the volume's
+    j, i = np.divmod(rem, nx)
+    cz, cy, cx = (max(n - 1, 1) for n in data.shape)
+    global_owner = ((k + z0) * cy + (j + y0)) * cx + (i + x0)
+    return Part([p.astype(np.float32)], [s.astype(np.float32)], [global_owner], candidates, int(emitting.size))
+
+
+def _block_cells(v, first, spacing):
+    """``_Cells``-like placing and corners for the cells of the block of samples ``v``
+    whose first sample is the volume's ``first`` (z, y, x)."""
+    nz, ny, nx = (n - 1 for n in v.shape)
+    z0, y0, x0 = first
+
+    def place(cells, rng):
+        k, rem = np.divmod(cells, ny * nx)
+        j, i = np.divmod(rem, nx)
+        f = rng.random((cells.size, 3))
+        fx, fy, fz = f[:, 0], f[:, 1], f[:, 2]
+        c00 = v[k, j, i] * (1 - fx) + v[k, j, i + 1] * fx
+        c10 = v[k, j + 1, i] * (1 - fx) + v[k, j + 1, i + 1] * fx
+        c01 = v[k + 1, j, i] * (1 - fx) + v[k + 1, j, i + 1] * fx
+        c11 = v[k + 1, j + 1, i] * (1 - fx) + v[k + 1, j + 1, i + 1] * fx
+        s = (c00 * (1 - fy) + c10 * fy) * (1 - fz) + (c01 * (1 - fy) + c11 * fy) * fz
+        p = (np.stack([i + x0, j + y0, k + z0], axis=1) + f) * spacing
+        return p, s
+
+    def corners(cells):
+        k, rem = np.divmod(cells, ny * nx)
+        j, i = np.divmod(rem, nx)
+        return np.stack([v[k + dz, j + dy, i + dx] for dz in (0, 1) for dy in (0, 1) for dx in (0, 1)], axis=1)
+    return _Cells(None, None, None, place, corners)
 
 
 def particle_gradients(particle_set, data):
@@ -191,6 +328,7 @@ class _Cells:
     volume: np.ndarray
     place: object
     corners: object
+    values: np.ndarray = None    # a grid's samples, float64
 
 
 _CELLS = weakref.WeakKeyDictionary()    # data -> _Cells, while the data lives
@@ -204,35 +342,17 @@ def _cells(data):
 
 
 def _grid_cells(vol):
+    """A grid's cell ranges and volumes (``candidate_count``) and its samples, float64
+    (placing is per tile: ``tile_particles``)."""
     v = vol.values(np.float64)
     eight = [v[z:z + v.shape[0] - 1, y:y + v.shape[1] - 1, x:x + v.shape[2] - 1]
              for z in (0, 1) for y in (0, 1) for x in (0, 1)]
     lo = np.minimum.reduce(eight).ravel()
     hi = np.maximum.reduce(eight).ravel()
-    spacing = vol.spacing.copy()         # (the closures hold arrays, never the volume: cached weakly)
-    volume = np.full(lo.size, float(np.prod(spacing)))
+    volume = np.full(lo.size, float(np.prod(vol.spacing)))
     if vol.cell_valid is not None:
         volume[~vol.cell_valid.ravel()] = 0.0
-    nz, ny, nx = (n - 1 for n in v.shape)
-
-    def place(cells, rng):
-        k, rem = np.divmod(cells, ny * nx)
-        j, i = np.divmod(rem, nx)
-        f = rng.random((cells.size, 3))
-        fx, fy, fz = f[:, 0], f[:, 1], f[:, 2]
-        c00 = v[k, j, i] * (1 - fx) + v[k, j, i + 1] * fx
-        c10 = v[k, j + 1, i] * (1 - fx) + v[k, j + 1, i + 1] * fx
-        c01 = v[k + 1, j, i] * (1 - fx) + v[k + 1, j, i + 1] * fx
-        c11 = v[k + 1, j + 1, i] * (1 - fx) + v[k + 1, j + 1, i + 1] * fx
-        s = (c00 * (1 - fy) + c10 * fy) * (1 - fz) + (c01 * (1 - fy) + c11 * fy) * fz
-        p = (np.stack([i, j, k], axis=1) + f) * spacing
-        return p, s
-
-    def corners(cells):
-        k, rem = np.divmod(cells, ny * nx)
-        j, i = np.divmod(rem, nx)
-        return np.stack([v[k + dz, j + dy, i + dx] for dz in (0, 1) for dy in (0, 1) for dx in (0, 1)], axis=1)
-    return _Cells(lo, hi, volume, place, corners)
+    return _Cells(lo, hi, volume, None, None, v)
 
 
 def _tet_cells(mesh):

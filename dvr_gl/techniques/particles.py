@@ -23,6 +23,9 @@ sampler : "rejection"
     Poisson candidates per cell thinned by tau(s) / tau_max: exact.
 target : "rgba32f" (default) | "rgba16f" | "rgba8"
     the averaged image's target.
+brick_size : None (default) or N: a grid's particles made brick by brick, from bricks of
+    N cells a side, each from its own block of samples (``point_bricks``): the same
+    particles, so the same image.
 
 Particles are drawn as point sprites; a particle whose centre lies outside the view's
 clip volume is not drawn (GL clips points by their centre).
@@ -70,6 +73,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import particle_sets as pbvr
+from . import point_bricks
+from .bricks import check_brick_size
 from ..util.cache import TableCache
 from ..gl.context import current
 from ..util.progress import Progress
@@ -111,11 +116,15 @@ def _check_int(name, value, lowest):
 
 
 def make_plan(scene, step=None, *, repetitions=1, seed=0, radius=None, sampler="rejection",
-              target="rgba32f", tables=None):
+              target="rgba32f", brick_size=None, tables=None):
     """Validate the options and get the particle sets (made once per data, TF, radius,
-    seed, repetitions and sampler; ``tables`` keeps them between frames)."""
+    seed, repetitions and sampler; ``tables`` keeps them between frames). ``brick_size``:
+    made brick by brick from bricks of that many cells a side (``point_bricks``)."""
     tables = tables or TableCache()
     check_scene(scene, "particles", MODES, data=DATA)
+    brick_size = check_brick_size(brick_size)
+    if brick_size is not None:
+        point_bricks.check_grid(scene, "particles")
     if step is not None:
         raise ValueError(f"particles takes no step (the particles' density follows the TF), got step={step!r}")
     repetitions = _check_int("repetitions", repetitions, 1)
@@ -131,16 +140,21 @@ def make_plan(scene, step=None, *, repetitions=1, seed=0, radius=None, sampler="
     data, tf = scene.volume, scene.tf
     # every set is made once: a larger repetition count (the viewer's accumulation, a
     # bench series) reuses the sets a smaller one made
-    pool = tables.get(f"particles:{radius!r}:{seed}:{sampler}", data, tf, make=lambda data, tf: {})
+    bricked = "" if brick_size is None else f":bricks {brick_size}:{int(scene.shading)}"
+    pool = tables.get(f"particles:{radius!r}:{seed}:{sampler}{bricked}", data, tf, make=lambda data, tf: {})
     missing = [k for k in range(repetitions) if k not in pool]
     t0 = time.perf_counter()
     progress = None
-    if missing and len(missing) * pbvr.candidate_count(data, tf, radius) >= PROGRESS_CANDIDATES:
+    if missing and brick_size is None and \
+            len(missing) * pbvr.candidate_count(data, tf, radius) >= PROGRESS_CANDIDATES:
         progress = Progress(len(missing))
     for n, k in enumerate(missing, 1):
         if progress is not None:
             progress.begin(f"particles: set {n} of {len(missing)}")
-        pool[k] = pbvr.generate(data, tf, radius, seed, k, sampler)
+        if brick_size is None:
+            pool[k] = pbvr.generate(data, tf, radius, seed, k, sampler)
+        else:       # each brick's particles, lit with gradients from its own block
+            pool[k] = point_bricks.particle_bricks(data, tf, radius, seed, k, sampler, brick_size, scene.shading)
         if progress is not None:
             progress.advance(f"particles: set {n} of {len(missing)}")
     if progress is not None:
@@ -153,7 +167,7 @@ def make_plan(scene, step=None, *, repetitions=1, seed=0, radius=None, sampler="
     if scene.geometry:
         defines["GEOMETRY"] = 1             # particles behind the first surface are not drawn
     gradients = None
-    if scene.shading:      # once per set, with the set
+    if scene.shading and brick_size is None:      # once per set, with the set (bricks: with each brick's)
         gradients = [tables.get("particle_gradients", s, data, make=pbvr.particle_gradients) for s in sets]
     return ParticlesPlan(scene=scene, sets=sets, radius=radius, repetitions=repetitions,
                          seed=seed, sampler=sampler, target=target, defines=defines,
@@ -210,12 +224,19 @@ def draw(renderer, plan):
         scratch.use()
         scratch.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
         if particle_set.count > 0:
-            vao = renderer.resources.for_objects("particles_vbo", particle_set, prog,
-                                                 make=lambda s=particle_set, g=gradients: _Points(ctx, prog, s, g),
-                                                 capacity=max(plan.repetitions, 2)).vao
+            # a bricked set: each brick's particles in a buffer of their own, all into
+            # the same depth test (the nearest sphere wins whatever the order)
+            pieces = getattr(particle_set, "pieces", [particle_set])
+            piece_gradients = getattr(particle_set, "gradients", None) or [gradients] * len(pieces)
             ctx.enable(ctx.DEPTH_TEST)
             ctx.depth_func = "<"
-            vao.render(ctx.POINTS)
+            for piece, g in zip(pieces, piece_gradients):
+                if piece.count == 0:
+                    continue
+                vao = renderer.resources.for_objects("particles_vbo", piece, prog,
+                                                     make=lambda s=piece, g=g: _Points(ctx, prog, s, g),
+                                                     capacity=max(plan.repetitions * len(pieces), 2)).vao
+                vao.render(ctx.POINTS)
             ctx.disable(ctx.DEPTH_TEST)
         fbo.use()
         ctx.enable(ctx.BLEND)

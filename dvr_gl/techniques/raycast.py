@@ -70,7 +70,7 @@ refine : 1 (default) or an integer from 2 to 64, with ``preintegrate=True``: ada
 refine_walk : "even" (default): a refined segment's parts as above; "reach": each part is
     as long as the field cannot reach the TF's detail from its front (value distance /
     G), at least 1/``refine`` of the segment, and cut at cell faces only where shorter
-    (``shaders/common/reach_walk.glsl``): short parts only where detail can be crossed.
+    (``shaders/common/reach_walk.glsl``); "crossings": cell by cell, see ``crossing_walk``.
 step_table : True (default): a full-length segment (all but a ray's first and last) reads
     its premultiplied, opacity-corrected segment from a table made once per TF and step
     (``LookupTable.step_table``) instead of correcting each sample's opacity (a log and an
@@ -122,11 +122,11 @@ from ..util.cache import TableCache
 from ..gl.resources import texture3d
 from ..model.scene import Scene
 from ..model.transfer import LookupTable
-from .common import (TARGETS, add_optional_inputs, draw_ray_proxy, bind, box_proxy, box_view, camera_uniforms, check_flag,
+from .common import (TARGETS, draw_ray_proxy, bind, box_proxy, box_view, camera_uniforms, check_flag,
                      check_scene, clip_defines, clip_uniforms, grow_pixels, shading_defines,
                      check_step, check_target, preintegration_applies, preintegration_table, tf_uniforms, volume_uniforms)
 from .geometry import surface_pass
-from . import raycast_layers
+from . import crossing_walk, raycast_layers
 from .bricks import (brick_occupancy, brick_size_for, bricked_defines, check_bricking, draw as draw_bricked,
                      halo_for, unsupported)
 from .lazy_bricks import plan_lazy
@@ -135,7 +135,7 @@ from .gpu import (check_interpolation, check_stage, draw_ray_compute, jitter_tex
 
 BRICK = 8            # brick edge in cells, for empty-space skipping
 MAX_REFINE = 64
-REFINE_WALKS = ("even", "reach")   # how a refined segment is cut (refine_walk)
+REFINE_WALKS = ("even", "reach", "crossings")   # how a refined segment is cut (refine_walk)
 MAX_REACH_BOUNDS = 1 << 24   # gradient bounds per volume at most (float32: 64 MB)
 JITTER_TABLE = 64    # jitter table edge in pixels
 
@@ -165,6 +165,7 @@ class RaycastPlan:
     brick_size: int | None = None          # cells per brick side (bricks.py), None: as the volume needs
     lazy: object = None                    # a LazyVolume's lazy_bricks.LazyBricking, else None
     stage: str = "auto"                    # where the per-pixel shader runs (gpu.pixel_stage)
+    crossings: object = None               # refine_walk='crossings': a crossing_walk.CrossingPlan
 
     @property
     def max_segments(self):
@@ -231,7 +232,7 @@ def make_plan(scene, step=None, *, target="rgba32f", jitter_seed=None, ert_trans
     jitter = None
     if jitter_seed is not None:
         jitter = jitter_table(int(jitter_seed))
-    preint = fine = bricks = detail = reach = None
+    preint = fine = bricks = detail = reach = crossings = None
     block = 1
     if preintegrate:
         preint = preintegration_table(scene, step, tables)
@@ -271,9 +272,9 @@ def make_plan(scene, step=None, *, target="rgba32f", jitter_seed=None, ert_trans
             defines["SKIP_EMPTY"] = 1
         if refine > 1:
             defines["REFINE"] = 1
-            defines["REACH_WALK"] = int(refine_walk == "reach")
             # a compile-time count: a uniform one cost the spike's frame 10 % (docs/notes/raycast.md)
             defines["DETAIL_COUNT"] = max(len(detail), 1)
+            crossings = crossing_walk.plan_walk(scene, step, refine, fine, tables, defines, refine_walk, preint_occupancy)
     defines.update(shading_defines(scene, gradients))
     defines.update(clip_defines(scene))
     if scene.geometry:
@@ -285,10 +286,10 @@ def make_plan(scene, step=None, *, target="rgba32f", jitter_seed=None, ert_trans
         step_rows = tables.get("step_table", lut, step / scene.tf.unit_distance,
                                make=lambda table, length_over_unit: table.step_table(length_over_unit))
         defines["STEP_TABLE"] = 1
-    return RaycastPlan(scene=scene, step=step, lut=lut, target=target, jitter=jitter,
-                       ert_transmittance=ert, occupancy=occupancy, preint=preint, defines=defines,
-                       step_rows=step_rows, refine=int(refine), preint_fine=fine, bricks=bricks, detail=detail,
-                       reach=reach, reach_block=block, brick_size=brick_size, lazy=lazy, stage=stage)
+    return RaycastPlan(scene=scene, step=step, lut=lut, target=target, jitter=jitter, ert_transmittance=ert,
+                       occupancy=occupancy, preint=preint, defines=defines, step_rows=step_rows, refine=int(refine),
+                       preint_fine=fine, bricks=bricks, detail=detail, reach=reach, reach_block=block,
+                       brick_size=brick_size, lazy=lazy, stage=stage, crossings=crossings)
 
 
 def uses_step_table(scene, preint):
@@ -537,16 +538,17 @@ def draw(renderer, plan):
     framebuffer (premultiplied RGBA, GL's row order: row 0 at the bottom)."""
     if isinstance(plan, raycast_layers.LayersPlan):   # several volumes
         return raycast_layers.draw(renderer, plan)
-    ctx = renderer.ctx
-    scene = plan.scene
-    volume = scene.volume
-    occupied = occupied_range(renderer, plan)
-    surfaces = surface_pass(renderer, scene) if scene.geometry else None   # each pixel's first surface
-    defines = dict(plan.defines, OCCUPIED_RANGE=1) if occupied is not None else plan.defines
+    ctx, scene, volume = renderer.ctx, plan.scene, plan.scene.volume
     brick_size = brick_size_for(renderer, plan)     # None: the volume in one texture
     compute = not brick_size and pixel_stage(renderer, plan.stage) == "compute"
+    # the compute stage (docs/notes/gpu.md): no raster pass for the occupied range, which
+    # cost more than it saved, and segments one at a time, not in groups of four
+    occupied = None if compute else occupied_range(renderer, plan)
+    surfaces = surface_pass(renderer, scene) if scene.geometry else None   # each pixel's first surface
+    defines = dict(plan.defines, OCCUPIED_RANGE=1) if occupied is not None else plan.defines
     if compute:
-        prog = renderer.programs.compute("raycast/raycast.frag", dict(defines, IMAGE_FORMAT=plan.target))
+        prog = renderer.programs.compute("raycast/raycast.frag", dict(defines, IMAGE_FORMAT=plan.target,
+                                                                       SEGMENT_GROUP=1))
     else:
         prog = renderer.programs.get("raycast/raycast.vert", "raycast/raycast.frag",
                                      dict(defines, **bricked_defines(renderer, volume)) if brick_size else defines)
@@ -567,7 +569,7 @@ def draw(renderer, plan):
                 **clip_uniforms(scene), "u_step": plan.step, "u_max_segments": plan.max_segments}
     if plan.occupancy is not None or plan.bricks is not None:
         uniforms["u_brick"] = float(BRICK)
-    add_optional_inputs(renderer, plan, textures, uniforms)
+    crossing_walk.add_inputs(renderer, plan, textures, uniforms)   # (and add_optional_inputs')
     if plan.bricks is not None:
         textures["t_occupancy"] = renderer.resources.for_objects(
             "preint_occupancy", plan.bricks, make=lambda: texture3d(ctx, plan.bricks, 1, "f4", linear=False))
@@ -578,8 +580,7 @@ def draw(renderer, plan):
     if plan.refine > 1:
         # (no detail: one interval no value meets)
         detail = np.array(plan.detail if len(plan.detail) else [[np.inf, -np.inf]], np.float32)
-        uniforms.update({"u_refine": plan.refine,
-                         "u_pi_fine_length": plan.preint_fine.length,
+        uniforms.update({"u_refine": plan.refine, "u_pi_fine_length": plan.preint_fine.length,
                          "u_refine_cuts": refine_cuts(plan)})
     if plan.ert_transmittance > 0:
         uniforms["u_ert_transmittance"] = plan.ert_transmittance

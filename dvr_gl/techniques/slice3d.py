@@ -57,6 +57,12 @@ preintegrate : classify whole segments between consecutive slices with the pre-i
 gradients : "on_the_fly" (default) | "texture": as for ray casting; with
     ``Scene(shading=True)`` every segment is lit with the gradient at its midpoint, the
     gap pass's pieces too.
+brick_size : None (default) or a whole number N: slice the volume in bricks of N cells a
+    side, each its own texture (``techniques.slice3d_bricks``); with None, bricks only
+    where a side exceeds GL_MAX_3D_TEXTURE_SIZE. The planes, samples and blending order
+    are the single texture's, so the image is too, up to the texture coordinate's
+    rounding. Not with preintegrate=True, gradients="texture" or non-finite samples (a
+    ValueError names it).
 """
 
 from __future__ import annotations
@@ -70,12 +76,14 @@ from ..util.cache import TableCache
 from ..model.scene import Scene
 from ..model.transfer import LookupTable
 from . import proxy as proxy_geometry
+from . import slice3d_bricks
+from .bricks import bricked_defines
 from .common import (cleared_target, add_optional_inputs, shading_defines, bind, camera_uniforms, draw_box_instances, check_flag, check_scene,
                      clip_defines, clip_uniforms,
                      check_step, check_target, inflated_corners, plane_projection, plane_triangles, preintegration_table,
                      tf_uniforms, volume_uniforms)
 from .geometry import draw_surface_behind, surface_pass
-from .gpu import empty_vao, stream_vao, tf_texture, volume_texture
+from .gpu import empty_vao, stream_vao, tf_texture, volume_texture as single_texture
 
 PROXIES = ("cpu", "vertex")
 
@@ -95,6 +103,7 @@ class Slice3DPlan:
     far_depth: float = 0.0         # depth (or radius) of slice 0; slice k is far_depth - k * step
     count: int = 0                 # number of slices
     defines: dict = field(default_factory=dict)
+    brick_size: int | None = None  # cells per brick side (slice3d_bricks), None: as the volume needs
 
     def depths(self):
         return self.far_depth - np.arange(self.count) * self.step
@@ -106,7 +115,7 @@ def default_step(volume):
 
 
 def make_plan(scene, step=None, *, target="rgba32f", proxy="cpu", shells=False, preintegrate=False,
-              gradients="on_the_fly", tables=None):
+              gradients="on_the_fly", brick_size=None, tables=None):
     tables = tables or TableCache()
     check_scene(scene, "slice3d", modes=MODES)
     volume = scene.volume
@@ -118,6 +127,7 @@ def make_plan(scene, step=None, *, target="rgba32f", proxy="cpu", shells=False, 
     preintegrate = check_flag("preintegrate", preintegrate)
     if shells and proxy != "cpu":
         raise ValueError(f"shells=True draws instanced box faces; proxy must be left as 'cpu', got {proxy!r}")
+    brick_size = slice3d_bricks.check_bricking(scene, brick_size, preintegrate, gradients)
     lut = tables.get("lut", scene.tf, make=LookupTable)
     preint = preintegration_table(scene, step, tables) if preintegrate else None
 
@@ -143,7 +153,8 @@ def make_plan(scene, step=None, *, target="rgba32f", proxy="cpu", shells=False, 
     if scene.geometry:
         defines["GEOMETRY"] = 1
     return Slice3DPlan(scene=scene, step=step, lut=lut, target=target, proxy=proxy, shells=shells,
-                       preint=preint, far_depth=float(far_depth), count=int(count), defines=defines)
+                       preint=preint, far_depth=float(far_depth), count=int(count), defines=defines,
+                       brick_size=brick_size)
 
 
 def shell_radii(extent, eye, step):
@@ -174,10 +185,12 @@ def draw(renderer, plan):
         vertex_shader = "slice3d/proxy_vertex.vert"
     else:
         vertex_shader = "common/slice_polygons.vert"
-    prog = renderer.programs.get(vertex_shader, "slice3d/slice3d.frag", plan.defines)
+    brick_size = slice3d_bricks.brick_size_for(renderer, plan)     # None: the volume in one texture
+    defines = dict(plan.defines, **bricked_defines(renderer, volume)) if brick_size else plan.defines
+    prog = renderer.programs.get(vertex_shader, "slice3d/slice3d.frag", defines)
 
     surfaces = surface_pass(renderer, scene) if scene.geometry else None   # each pixel's first surface
-    textures, uniforms = slice_inputs(renderer, plan)
+    textures, uniforms = slice_inputs(renderer, plan, volume_texture=not brick_size)
     if surfaces is not None:
         textures["t_surface"] = surfaces
     bind(prog, textures, uniforms)
@@ -191,6 +204,10 @@ def draw(renderer, plan):
     ctx.blend_func = ctx.ONE, ctx.ONE_MINUS_SRC_ALPHA
     ctx.blend_equation = ctx.FUNC_ADD
     try:
+        if brick_size:
+            gap = renderer.programs.get("common/box_instances.vert", "slice3d/slice3d.frag", {**defines, "GAP": 1})
+            slice3d_bricks.draw(renderer, plan, prog, gap, textures, uniforms, brick_size)
+            return fbo
         # with no plane inside the box (a box thinner along the view than a step), every
         # ray is the gap pass's
         if plan.count == 0:
@@ -214,11 +231,13 @@ def draw(renderer, plan):
     return fbo
 
 
-def slice_inputs(renderer, plan):
-    """The slicing pass's textures and uniforms (splat's gap pass binds them too)."""
+def slice_inputs(renderer, plan, volume_texture=True):
+    """The slicing pass's textures and uniforms (splat's gap pass binds them too); without
+    the volume's texture for bricks, which bind their own."""
     scene = plan.scene
     volume = scene.volume
-    textures = {"t_volume": volume_texture(renderer, volume), "t_tf": tf_texture(renderer, plan.lut)}
+    textures = {"t_volume": single_texture(renderer, volume)} if volume_texture else {}
+    textures["t_tf"] = tf_texture(renderer, plan.lut)
     uniforms = {**camera_uniforms(scene), **volume_uniforms(volume), **tf_uniforms(plan.lut, scene.tf),
                 **clip_uniforms(scene), "u_far_depth": plan.far_depth, "u_step": plan.step, "u_slice_count": plan.count}
     add_optional_inputs(renderer, plan, textures, uniforms)

@@ -165,6 +165,9 @@ cutoff : Gaussian only
     truncation in standard deviations (default 3).
 target : "rgba32f" (default) | "rgba16f" | "rgba8": blending happens in the target (the
     tent's sheet buffers are RGBA32F whatever the target).
+brick_size : None (default) or N: a grid's samples made brick by brick from bricks of N
+    cells a side, each from its own block (``point_bricks``): the same samples in the
+    same order, so the same image.
 """
 
 from __future__ import annotations
@@ -188,6 +191,8 @@ from .geometry import draw_surface_behind, surface_pass
 from .gpu import cell_valid_texture, proxy_vao, stream_vao, tf_texture, volume_texture
 from .particle_sets import extinction
 from .particles import pixels_per_unit
+from . import point_bricks
+from .bricks import check_brick_size
 
 POINT_SPRITES = True  # the Gaussian kernel's splats are GL points, clipped by their centres (see Renderer.render)
 MODES = ("composite",)
@@ -205,11 +210,15 @@ QUAD_MARGIN = 1.0 / 16
 
 
 def make_plan(scene, step=None, *, kernel=None, density=1, sheet_spacing=None, skip_empty=True, radius=None,
-              cutoff=None, target="rgba32f", tables=None):
+              cutoff=None, target="rgba32f", brick_size=None, tables=None):
     """Validate the options and plan the kernel's splats for this view (the samples are
-    made once per volume and transfer function, the order once per view)."""
+    made once per volume and transfer function, the order once per view; with
+    ``brick_size``, brick by brick: ``point_bricks``)."""
     tables = tables or TableCache()
     check_scene(scene, "splat", MODES, data=DATA)
+    brick_size = check_brick_size(brick_size)
+    if brick_size is not None:
+        point_bricks.check_grid(scene, "splat")
     if step is not None:
         raise ValueError(f"splat takes no step (see density and sheet_spacing), got step={step!r}")
     if kernel is None:
@@ -228,7 +237,7 @@ def make_plan(scene, step=None, *, kernel=None, density=1, sheet_spacing=None, s
         if given:
             raise ValueError(f"{' and '.join(given)} size the Gaussian kernel (kernel='gaussian'); the tent "
                              "kernel is one sample spacing wide")
-        return _tent_plan(scene, int(density), sheet_spacing, skip_empty, target, tables)
+        return _tent_plan(scene, int(density), sheet_spacing, skip_empty, target, tables, brick_size)
     if sheet_spacing is not None:
         raise ValueError("sheet_spacing is the tent kernel's (kernel='tent'); the Gaussian kernel's splats "
                          "are composited one by one")
@@ -237,7 +246,7 @@ def make_plan(scene, step=None, *, kernel=None, density=1, sheet_spacing=None, s
                          "and are never drawn")
     radius = DEFAULT_RADIUS if radius is None else radius
     cutoff = DEFAULT_CUTOFF if cutoff is None else cutoff
-    return _gaussian_plan(scene, density, radius, cutoff, target, tables)
+    return _gaussian_plan(scene, density, radius, cutoff, target, tables, brick_size)
 
 
 def draw(renderer, plan):
@@ -333,7 +342,7 @@ class TentPlan:
         return self.sheets.count
 
 
-def _tent_plan(scene, density, sheet_spacing, skip_empty, target, tables):
+def _tent_plan(scene, density, sheet_spacing, skip_empty, target, tables, brick_size=None):
     volume = scene.volume
     if sheet_spacing is None:
         sheet_spacing = volume.min_spacing / density
@@ -343,8 +352,12 @@ def _tent_plan(scene, density, sheet_spacing, skip_empty, target, tables):
                              f"sheet_spacing={sheet_spacing!r})")
         sheet_spacing = check_step(sheet_spacing, volume, "sheet_spacing")
     lut = tables.get("lut", scene.tf, make=LookupTable)
-    samples = tables.get(f"tent_samples:{int(skip_empty)}", volume, lut,
-                         make=lambda v, table: tent_samples(v, table, skip_empty))
+    if brick_size is None:
+        samples = tables.get(f"tent_samples:{int(skip_empty)}", volume, lut,
+                             make=lambda v, table: tent_samples(v, table, skip_empty))
+    else:
+        samples = tables.get(f"tent_samples:{int(skip_empty)}:bricks {brick_size}", volume, lut,
+                             make=lambda v, table: bricked_tent_samples(v, table, skip_empty, brick_size))
     axis = run_axis(samples, volume, scene.camera.forward)
     runs = None if samples.count == 0 else tables.get("tent_runs", samples, axis,
                                                       make=lambda s, a: runs_along(s, a))
@@ -362,7 +375,10 @@ def _tent_plan(scene, density, sheet_spacing, skip_empty, target, tables):
     if scene.geometry:
         defines["GEOMETRY"] = 1            # and end at the first surface
     gradients = None
-    if scene.shading:      # once per set of samples
+    if scene.shading and brick_size is not None:    # each from its brick's block
+        gradients = tables.get("tent_gradients", samples, volume,
+                               make=lambda s, v: point_bricks.tent_gradients_bricked(s, v, brick_size))
+    elif scene.shading:      # once per set of samples
         gradients = tables.get("tent_gradients", samples, volume, make=tent_gradients)
     return TentPlan(scene=scene, samples=samples, sheets=sheets, lut=lut, density=density, skip_empty=skip_empty,
                     target=target, defines=defines, splat_defines=splat_defines, gradients=gradients, gap=gap)
@@ -422,6 +438,13 @@ def tent_samples(volume, lut, skip_empty=True):
     at = np.argwhere(mask)[:, ::-1].astype(np.int32)           # x, y, z; the order of mask's True
     flags = np.ones(len(at), bool) if finite is None else finite[mask]
     return TentSamples(volume.values(np.float32)[mask], at, flags, mask, _run_stats(mask))
+
+
+def bricked_tent_samples(volume, lut, skip_empty, brick_size):
+    """``tent_samples`` made brick by brick (``point_bricks.tent_bricks``): the same."""
+    splatted = (lambda block: _corners_of(occupied_cells(block, lut))) if skip_empty else None
+    values, at, mask = point_bricks.tent_bricks(volume, splatted, brick_size)
+    return TentSamples(values, at, np.ones(len(at), bool), mask, _run_stats(mask))
 
 
 def _run_stats(mask):
@@ -801,16 +824,20 @@ def make_splats(volume, tf, density):
         if not keep.any():
             continue
         idx, s, tau = idx[keep], s[keep], tau[keep]
-        # trapezoid weights: a sample on a face of the box stands for half a cell along
-        # that axis, so the kernels carry the trapezoid rule's integral of tau over the box
-        weight = np.prod(np.where((idx == 0) | (idx == dims - 1), 0.5, 1.0), axis=1)
-        points.append((idx * volume.spacing).astype(np.float32))
-        samples.append(np.concatenate([tf.color(s).reshape(-1, 3), (tau * weight * cell)[:, None]],
-                                      axis=1).astype(np.float32))
+        at, rows = point_bricks.splat_rows(idx, s, tau, dims, volume.spacing, tf, cell)
+        points.append(at)
+        samples.append(rows)
     if not points:
         return Splats(np.zeros((0, 3), np.float32), np.zeros((0, 4), np.float32), np.zeros(0, np.float32), spacing)
     points = np.concatenate(points)
     return Splats(points, np.concatenate(samples), np.ones(len(points), np.float32), spacing)
+
+
+def bricked_splats(volume, tf, density, brick_size):
+    """(``make_splats``'s Splats made brick by brick, each one's place in their order:
+    ``point_bricks.splat_bricks``)."""
+    points, samples, key = point_bricks.splat_bricks(volume, tf, density, brick_size)
+    return Splats(points, samples, np.ones(len(points), np.float32), volume.spacing / density), key
 
 
 def make_mesh_splats(mesh, tf):
@@ -843,7 +870,7 @@ def back_to_front(scene, splats):
     return np.argsort(-key, kind="stable").astype(np.int32)
 
 
-def _gaussian_plan(scene, density, radius, cutoff, target, tables):
+def _gaussian_plan(scene, density, radius, cutoff, target, tables, brick_size=None):
     """Check the Gaussian kernel's options, get the samples (once per volume, TF and
     density) and their order for this view."""
     for name, value in (("radius", radius), ("cutoff", cutoff)):
@@ -853,18 +880,27 @@ def _gaussian_plan(scene, density, radius, cutoff, target, tables):
         if density != 1:
             raise ValueError(f"density applies to grids (a mesh is splatted at its points), got density={density!r}")
         splats = tables.get("splats:mesh", scene.volume, scene.tf, make=make_mesh_splats)
+    elif brick_size is not None:      # brick by brick, in the single texture's order
+        splats, key = tables.get(f"splats:{int(density)}:bricks {brick_size}", scene.volume, scene.tf,
+                                 make=lambda volume, tf: bricked_splats(volume, tf, int(density), brick_size))
     else:
         splats = tables.get(f"splats:{int(density)}", scene.volume, scene.tf,
                             make=lambda volume, tf: make_splats(volume, tf, int(density)))
-    order = tables.get("splat_order", splats, scene.camera,
-                       make=lambda s, camera: back_to_front(scene, s))
+    if brick_size is None:
+        order = tables.get("splat_order", splats, scene.camera, make=lambda s, camera: back_to_front(scene, s))
+    else:
+        order = tables.get("splat_order", splats, scene.camera,
+                           make=lambda s, camera: point_bricks.splat_order(scene, s, key))
     defines = {"ORTHO": 1} if scene.camera.is_ortho else {}
     defines.update(point_shading_defines(scene))
     defines.update(clip_defines(scene))     # splats whose centre is clipped away are not drawn
     if scene.geometry:
         defines["GEOMETRY"] = 1             # a kernel counts by its part in front of the first surface
     gradients = None
-    if scene.shading:      # once per set of splats
+    if scene.shading and brick_size is not None:    # each from its brick's block
+        gradients = tables.get("splat_gradients", splats, scene.volume, make=lambda s, v: point_bricks.
+                               splat_gradients_bricked(v, s, key, int(density), brick_size))
+    elif scene.shading:      # once per set of splats
         gradients = tables.get("splat_gradients", splats, scene.volume, make=splat_gradients)
     return SplatPlan(scene=scene, splats=splats, order=order, density=int(density), radius=float(radius),
                      cutoff=float(cutoff), target=target, defines=defines, gradients=gradients)

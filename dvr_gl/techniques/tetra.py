@@ -57,6 +57,10 @@ sort : "auto" (default): "walk" for meshes it takes (fewer than 2^24 tets), else
     (``dvr_gl.techniques.tetra_walk``). The plan keeps the order taken.
 target : "rgba32f" (default) | "rgba16f" | "rgba8"
     blending happens in the target.
+segments : "exact" (default) | "table": with ``sort="walk"`` (composite, emission and
+    absorption, no shading), each segment from a per-TF table of cumulative extinction
+    (``dvr_gl.model.segment_table``): cheaper, approximate, its error measured by the
+    mesh pilot (``rendering.mesh_tolerance``).
 """
 
 from __future__ import annotations
@@ -152,7 +156,7 @@ def _drop_clipped(scene, cells, tables):
     return cells[keep[cells]]
 
 
-def make_plan(scene, step=None, *, sort="auto", target="rgba32f", stage="auto", tables=None):
+def make_plan(scene, step=None, *, sort="auto", target="rgba32f", stage="auto", segments="exact", tables=None):
     """Validate the options and decide what the scene needs. ``tables`` keeps the
     visible cells (per TF) and the order (per view) between frames."""
     tables = tables or TableCache()
@@ -170,6 +174,9 @@ def make_plan(scene, step=None, *, sort="auto", target="rgba32f", stage="auto", 
     if sort == "walk":
         from . import tetra_walk
         tetra_walk.check_scene(scene)
+    if segments != "exact":
+        from .tetra_walk import check_table_segments
+        check_table_segments(scene, sort, segments)
     knots = tables.get("segment_knots", tf, make=SegmentKnots)
     if scene.mode != "composite":
         # order-independent reductions of the field (not of the TF): every cell with a
@@ -189,20 +196,24 @@ def make_plan(scene, step=None, *, sort="auto", target="rgba32f", stage="auto", 
     timing = {}
 
     def order(mesh, tf, camera):
-        if sort == "walk":       # no order: the GPU walks each ray (tetra_walk); the twin's cells
-            return Order(visible, 0, 0)
         t0 = time.perf_counter()
         fn = mpvo_order if sort == "mpvo" else centroid_order
         result = fn(mesh, visible, scene)
         timing["sort"] = time.perf_counter() - t0
         return result
 
-    # the key's objects compare by identity, the string by value (it holds the image size,
-    # on which the per-pixel gap constraints depend)
-    result = tables.get(f"tetra_order:{sort}:{scene.width}x{scene.height}", mesh, tf, scene.camera, make=order)
     flat = topology(mesh).flat
-    draw = result.cells[~flat[result.cells]].astype(np.int32)
-    draw = _drop_clipped(scene, draw, tables)
+
+    def drawn(result):
+        return _drop_clipped(scene, result.cells[~flat[result.cells]].astype(np.int32), tables)
+    if sort == "walk":      # no order (the GPU walks each ray): the cells are kept per mesh, TF and clip
+        result = Order(visible, 0, 0)
+        draw = tables.get(f"tetra_walk_drawn:{_clip_key(scene)}", mesh, tf, make=lambda *_: drawn(result))
+    else:
+        # the key's objects compare by identity, the string by value (it holds the image
+        # size, on which the per-pixel gap constraints depend)
+        result = tables.get(f"tetra_order:{sort}:{scene.width}x{scene.height}", mesh, tf, scene.camera, make=order)
+        draw = drawn(result)
     defines = {"KNOT_CAPACITY": knot_capacity(knots.count), **clip_defines(scene)}
     if scene.camera.is_ortho:
         defines["ORTHO"] = 1
@@ -210,6 +221,8 @@ def make_plan(scene, step=None, *, sort="auto", target="rgba32f", stage="auto", 
         defines["GEOMETRY"] = 1
     if scene.optical_model != "emission_absorption":     # absorption (1) or emission (2) only
         defines["OPTICAL_MODEL"] = OPTICAL_MODELS.index(scene.optical_model)
+    if segments == "table":
+        defines["SEGMENT_TABLE"] = 1
     if scene.shading or scene.illustration:   # terms of each cell's own (constant) gradient
         defines["SAMPLE_TERMS"] = 1
         defines.update({name.upper(): 1 for name in scene.illustration})

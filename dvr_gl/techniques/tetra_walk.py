@@ -17,8 +17,9 @@ Per view, the CPU uploads a camera; then, per layer of depth peeling:
    finding where its pixel's ray crosses the face's plane going in, inside the face's
    triangle; the first draw keeps the nearest such t beyond where the pixel's last walk
    stopped (MIN blending, exact), the second the smallest cell at exactly that t. An
-   occlusion query on the second draw says whether any pixel has an entry left: if none,
-   peeling stops.
+   occlusion query on the first draw says whether any pixel has an entry left: if none,
+   peeling stops there, without the second draw. The layers the last frame drew are drawn without reading their
+   queries (reading one waits for the GPU), so a frame like the last waits once.
 2. walk pass (``walk.frag``, full screen): from its entry, each pixel's ray goes from
    cell to cell through the face adjacency; in each cell the segment is tetra's own
    (largest entering and smallest leaving plane crossing, the same float32 arithmetic),
@@ -26,7 +27,10 @@ Per view, the CPU uploads a camera; then, per layer of depth peeling:
    (``common/linear_segment.glsl``) and composited front to back. Leaving through a
    boundary face ends the layer for that pixel; a non-convex domain's re-entry is the
    next layer's entry. A pixel is done at the end of its kept interval or at opacity
-   1 - 2^-20 (composite).
+   1 - 2^-20 (composite). The code for zero-volume cells and folded faces is compiled in
+   only for meshes that have them (``rare_paths``): llvmpipe runs both sides of a
+   per-pixel branch, so that code cost every step (15-25 % of the frame on the NASA
+   meshes). ``segments="table"``: the approximate integral of ``model.segment_table``.
 3. resolve: the accumulation into the image's target (composite, with the surface
    behind it) or classified (mip, minip, average: ``tetra_classify.frag``).
 
@@ -77,6 +81,45 @@ def check_scene(scene):
     if mesh.n_tets >= MAX_CELLS:
         raise WalkUnsupported(f"sort='walk' takes meshes of fewer than {MAX_CELLS} tets, got {mesh.n_tets}; "
                               "use sort='centroid'")
+
+
+SEGMENTS = ("exact", "table")
+
+
+def check_table_segments(scene, sort, segments):
+    """``segments="table"`` (``model.segment_table``) is the walk's, for composite
+    emission-absorption without per-cell light or illustration terms; else a clear error."""
+    if segments not in SEGMENTS:
+        raise ValueError(f"segments must be one of {', '.join(SEGMENTS)}, got {segments!r}")
+    if segments == "exact":
+        return
+    if sort != "walk":
+        raise ValueError(f"segments='table' is the cell walk's (sort='walk'), got sort={sort!r}")
+    if scene.mode != "composite" or scene.optical_model != "emission_absorption":
+        raise ValueError(f"segments='table' integrates composite emission-absorption segments, got mode="
+                         f"{scene.mode!r}, optical_model={scene.optical_model!r}")
+    if scene.shading or scene.illustration or scene.tf_2d is not None:
+        raise ValueError("segments='table' takes a 1D TF without shading or illustration terms; use "
+                         "segments='exact'")
+
+
+def segment_table_texture(renderer, tf):
+    """The TF's ``model.segment_table.SegmentTable`` (kept per TF) and its (ENTRIES, 2)
+    RGBA32F texture, read with texelFetch."""
+    from ..model.segment_table import SegmentTable
+    table = renderer.tables.get("segment_table", tf, make=SegmentTable)
+
+    def make():
+        tex = renderer.ctx.texture((table.size, 2), 4, table.texture_rows().tobytes(), dtype="f4")
+        tex.filter = (renderer.ctx.NEAREST, renderer.ctx.NEAREST)
+        return tex
+    return table, renderer.resources.for_objects("tetra_walk_segment_table", table, make=make, capacity=2)
+
+
+def rare_paths(mesh):
+    """walk.frag's switches for the rare cells this mesh has: WALK_FLAT (zero-volume
+    cells) and WALK_FOLDS (folded faces), each 0 where it has none."""
+    return {"WALK_FLAT": int(topology(mesh).flat.any()), "WALK_FOLDS": int(folded_faces(mesh).any())}
 
 
 def max_steps(mesh):
@@ -176,6 +219,7 @@ class WalkTextures:
         self.face_vertices = len(faces)
         self.faces = ctx.buffer(faces.tobytes())
         self.vaos = {}
+        self.layers_drawn = 0       # layers the last draw walked (draw: drawn without waiting)
 
     def vao(self, ctx, prog):
         vao = self.vaos.get(prog.glo)
@@ -219,7 +263,7 @@ def draw(renderer, plan, data, texture):
     """Render a ``sort="walk"`` plan into the renderer's target; returns that framebuffer.
     ``data``: tetra's per-mesh textures (``tetra.MeshTextures``: planes, field, points,
     cells), ``texture``: tetra's maker of long tables as textures (``tetra._texture``).
-    Sets ``plan.walk_passes`` (layers walked) and ``plan.walk_left`` (pixels still having
+    Sets ``plan.walk_passes`` (layers walked, with or without entries) and ``plan.walk_left`` (pixels still having
     an entry after ``MAX_PASSES``; 0 unless the cap was reached)."""
     from .common import cleared_target
     ctx = renderer.ctx
@@ -257,8 +301,9 @@ def draw(renderer, plan, data, texture):
     entry_prog = renderer.programs.get("tetra/walk_entry.vert", "tetra/walk_entry.frag", view,
                                        geometry="tetra/walk_entry.geom")
     compute = pixel_stage(renderer, plan.stage) == "compute"
-    walk_prog = (renderer.programs.compute("tetra/walk.frag", plan.defines) if compute else
-                 renderer.programs.get("tetra/fullscreen.vert", "tetra/walk.frag", plan.defines))
+    walk_defines = {**plan.defines, **renderer.tables.get("tetra_walk_rare_paths", mesh, make=rare_paths)}
+    walk_prog = (renderer.programs.compute("tetra/walk.frag", walk_defines) if compute else
+                 renderer.programs.get("tetra/fullscreen.vert", "tetra/walk.frag", walk_defines))
     view_proj = data_projection(scene, near=None if scene.camera.is_ortho else
                                 1e-6 * float(np.linalg.norm(mesh.extent))).astype("f4").tobytes()
     cam = camera_uniforms(scene)
@@ -270,6 +315,11 @@ def draw(renderer, plan, data, texture):
     if scene.shading or scene.illustration:
         walk_uniforms.update(sample_term_uniforms(renderer, scene, plan.defines))
     knot_uniforms(walk_prog, plan.knots, plan.defines["KNOT_CAPACITY"])
+    extra_textures = {}
+    if plan.defines.get("SEGMENT_TABLE"):
+        table, extra_textures["t_segment_table"] = segment_table_texture(renderer, scene.tf)
+        walk_uniforms.update(u_table_lo=table.lo, u_table_hi=table.hi, u_table_scale=table.scale,
+                             u_table_size=table.size)
     faces = walk.vao(ctx, entry_prog)
     starts = start_faces(mesh, scene.camera, walked)
     start_vao = None
@@ -284,12 +334,16 @@ def draw(renderer, plan, data, texture):
     targets.state_only[0].use()
     targets.state_only[0].clear(0.0, -1.0, 0.0, 0.0)     # stopped at t = 0, no entry yet
     src = 0
+    # as many layers as the last frame drew are drawn without waiting for their entry
+    # counts (a layer without entries leaves every pixel as it was): one wait a frame
+    counted_from = min(walk.layers_drawn, MAX_PASSES)
     for layer in range(MAX_PASSES + 1):
         first_from_eye = layer == 0 and start >= 0
         if not first_from_eye:
             starting = layer == 0 and start_vao is not None
+            count = "pixels" if layer == MAX_PASSES else layer >= counted_from
             if _entries(ctx, entry_prog, faces, walk, data, flags, targets, src, query,
-                        start_vao if starting else None) == 0:
+                        start_vao if starting else None, count) == 0 and count:
                 break
             if layer == MAX_PASSES:         # the cap: what is left is counted, not walked
                 plan.walk_left = int(query.samples)
@@ -299,7 +353,7 @@ def draw(renderer, plan, data, texture):
         textures = {"t_planes": data.planes, "t_field": data.field, "t_neighbours": walk.neighbours, "t_flags": flags,
                     "t_tets": data.tets, "t_points": data.points,
                     "t_acc": targets.acc[src], "t_state": targets.state[src], "t_entry_t": targets.entry_t,
-                    "t_entry_cell": targets.entry_cell}
+                    "t_entry_cell": targets.entry_cell, **extra_textures}
         if surfaces is not None:
             textures["t_surface"] = surfaces
         bind(walk_prog, textures, {**walk_uniforms, "u_start_cell": start if first_from_eye else -1})
@@ -313,6 +367,7 @@ def draw(renderer, plan, data, texture):
             empty_vao(renderer, walk_prog).render(ctx.TRIANGLES, vertices=3)
         src = dst
         plan.walk_passes += 1
+    walk.layers_drawn = plan.walk_passes
     ctx.disable(ctx.BLEND)
     fbo.use()
     if composite:
@@ -328,7 +383,10 @@ def draw(renderer, plan, data, texture):
         knot_uniforms(resolve, plan.knots, plan.defines["KNOT_CAPACITY"])
     if surfaces is not None:
         textures["t_surface"] = surfaces
-    bind(resolve, textures, {})
+    # read back next (Renderer._draw): rows stored top down, so the read needs no flip
+    top_down = getattr(renderer, "rows_top_down_wanted", False)
+    bind(resolve, textures, {"u_rows_top_down": top_down})
+    renderer.top_down_target = fbo if top_down else None
     empty_vao(renderer, resolve).render(ctx.TRIANGLES, vertices=3)
     plan.walk_state = targets.state[src]
     return fbo
@@ -395,11 +453,14 @@ class _StartFaces:
             self.buffer = None
 
 
-def _entries(ctx, prog, faces, walk, data, flags, targets, src, query, start=None):
+def _entries(ctx, prog, faces, walk, data, flags, targets, src, query, start=None, count=True):
     """The entry pass: each pixel's nearest eligible entry (t, then the smallest cell at
     that t) into ``targets.entry_t`` and ``entry_cell``; returns the pixels that have one
-    (samples of the second draw). ``start``: (vertex array, vertices) of the start faces
-    (orthographic rays that start inside the mesh), drawn too."""
+    (samples of the second draw) with ``count="pixels"``; with ``count`` True 0 where none
+    has one (the first draw kept no fragment: the second is then not drawn), else the
+    first draw's kept fragments; None unless ``count`` (a count waits for the GPU).
+    ``start``: (vertex array, vertices) of the start faces (orthographic rays that start
+    inside the mesh), drawn too."""
 
     def render(pick):
         bind(prog, {}, {"u_pick_cell": pick, "u_start_faces": False})
@@ -418,10 +479,19 @@ def _entries(ctx, prog, faces, walk, data, flags, targets, src, query, start=Non
         targets.entry_t_fbo.clear(NO_ENTRY, NO_ENTRY, NO_ENTRY, NO_ENTRY)
         # t_nearest is not read in this draw; bound to a texture not drawn into
         bind(prog, dict(textures, t_nearest=targets.entry_cell), {})
-        render(False)
+        if count:       # the first draw's kept fragments: 0 when no ray has an entry left,
+            with query:  # and the second draw is then not needed (the last layer's pass)
+                render(False)
+            if query.samples == 0:
+                return 0
+        else:
+            render(False)
         targets.entry_cell_fbo.use()
         targets.entry_cell_fbo.clear(NO_ENTRY, NO_ENTRY, NO_ENTRY, NO_ENTRY)
         bind(prog, textures, {})
+        if count != "pixels":
+            render(True)
+            return query.samples if count else None
         with query:
             render(True)
     finally:

@@ -132,6 +132,12 @@ out vec4 f_color;
 uniform sampler2D t_occupied_range;   // per pixel: (least entry, -greatest exit) into the
                                       // occupied bricks' grown boxes (raycast.occupied_range)
 #endif
+#ifndef CROSSING_WALK
+#define CROSSING_WALK 0    // pre-integration: cells walked, cut where the field crosses TF knots
+#endif
+#if CROSSING_WALK
+#include "common/crossing_walk.glsl"
+#endif
 
 #if SKIP_EMPTY
 // Whether the brick holding p is empty, and if so where the ray leaves it.
@@ -171,6 +177,9 @@ int skipEmptyBrick(vec3 p, vec3 origin, vec3 dir, float t0, float jitter, int k)
 }
 #endif
 
+#ifndef SEGMENT_GROUP
+#define SEGMENT_GROUP 4    // full segments per loop round (step table): 4 or 1
+#endif
 #if STEP_TABLE
 // Full segment k's midpoint: from k, never accumulated, so a skip cannot move a sample.
 vec3 segmentMidpoint(vec3 origin, vec3 dir, float t0, float jitter, int k) {
@@ -330,6 +339,21 @@ void PIXEL_MAIN() {
     // group: the image is the one-at-a-time loop's whatever the groups' starts, so
     // skipping still changes no pixel.
     int k_end = min(k_stop, u_max_segments);
+  #if SEGMENT_GROUP == 1
+    // one at a time: the compute stage (raycast.draw; faster there on a GPU, docs/notes/gpu.md)
+    for (int k = k_first; k < k_end; ++k) {
+        vec3 p0 = segmentMidpoint(origin, dir, t0, jitter, k);
+        vec4 piece0 = fullSegment(p0);
+        if (piece0.a <= 0.0) {
+    #if SKIP_EMPTY && !PREINTEGRATE
+            k = skipEmptyBrick(p0, origin, dir, t0, jitter, k);
+    #endif
+            continue;
+        }
+        compositeUntilEnd(color, alpha_acc, litSegment(piece0, p0, dir), ended);
+        if (ended) break;
+    }
+  #else
     for (int k = k_first; k < k_end; k += 4) {
         vec3 p0 = segmentMidpoint(origin, dir, t0, jitter, k);
         vec3 p1 = segmentMidpoint(origin, dir, t0, jitter, k + 1);
@@ -352,6 +376,7 @@ void PIXEL_MAIN() {
         compositeUntilEnd(color, alpha_acc, litSegment(piece3, p3, dir), ended);
         if (ended) break;
     }
+  #endif
     if (!ended) {
         PRECISE float t_last = max(t0 + (jitter + float(n_full)) * u_step, t0);
         compositePartial(origin, dir, t_last, t1, color, alpha_acc);
@@ -378,7 +403,14 @@ void PIXEL_MAIN() {
     if (ended_before) k_last = k_first - 1;
     #endif
   #endif
-  #if MODE_COMPOSITE && PREINTEGRATE && REFINE
+  #if MODE_COMPOSITE && PREINTEGRATE && CROSSING_WALK
+    // (every cell outside the occupied range is empty: the walk starts and stops there)
+    #if OCCUPIED_RANGE
+    crossingWalk(origin, dir, max(t0, t_enter), min(t1, t_leave), color, alpha_acc);
+    #else
+    crossingWalk(origin, dir, t0, t1, color, alpha_acc);
+    #endif
+  #elif MODE_COMPOSITE && PREINTEGRATE && REFINE
     // One loop over pieces: a piece is a whole segment, or, where the segment may meet
     // TF detail, one part of its walk from cut to cut. Each round fetches one value and
     // reads one table: llvmpipe runs a round for a group of pixels as long as any of them

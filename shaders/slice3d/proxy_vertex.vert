@@ -27,6 +27,7 @@ uniform ivec2 u_edges[12];     // (corner, corner) pairs: rows 0-2 path A, 3-5 p
                                // 6-8 path C, each from the nearest corner to the farthest;
                                // 9, 10, 11 the cross edges A-B, B-C, C-A
 uniform mat4 u_view_proj;
+uniform int u_slice_base;      // slice of instance 0 (0; bricks draw a run of slices)
 
 flat out int v_slice;          // the slice index, gl_InstanceID
 out vec3 v_point;              // the vertex, box-relative world units (also captured by
@@ -56,7 +57,7 @@ bool edgeHit(int e, float depth, out vec3 point) {
 void main() {
     int slot = FAN[gl_VertexID % 12];
     int path = slot / 2;
-    float depth = u_far_depth - float(gl_InstanceID) * u_step;
+    float depth = u_far_depth - float(gl_InstanceID + u_slice_base) * u_step;
 
     vec3 point = u_corners[u_edges[0].x];
     bool inside = depth >= cornerDepth(u_edges[0].x) && depth <= cornerDepth(u_edges[2].y);

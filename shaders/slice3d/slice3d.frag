@@ -21,6 +21,7 @@
 
 #include "common/camera_ray.glsl"
 #include "common/ray_box.glsl"
+#include "common/bricks.glsl"
 #include "common/clip.glsl"
 #include "common/slabs.glsl"
 #include "common/sampling.glsl"
@@ -37,6 +38,14 @@ uniform float u_inv_unit;     // 1 / transfer-function unit distance
 
 flat in int v_slice;
 out vec4 f_color;
+
+#if BRICKED
+uniform int u_slice_base;     // the first slice of this brick's draw (instanced proxies;
+                              // 0 where the vertices carry their global index)
+#define SLICE_INDEX (v_slice + u_slice_base)
+#else
+#define SLICE_INDEX v_slice
+#endif
 
 #if GEOMETRY
 uniform sampler2D t_surface;  // per pixel: the first surface's lit colour and its ray
@@ -80,12 +89,14 @@ void main() {
     pixelRay(origin, dir);
     vec2 range = rayRange(origin, dir);
     float cos_theta = dot(dir, u_forward);
-    int k = v_slice;
+    int k = SLICE_INDEX;
     float t = sliceT(k, cos_theta);
     if (!sliceInside(k, t, range)) discard;
 #if !PREINTEGRATE
     // the slab halfway to each neighbour, or to the box where there is none
     vec2 slab = slabSegment(k, t, cos_theta, range);
+    // bricks: the brick whose cells hold the slab's sample draws it (no other does)
+    if (!OWNED(origin + (0.5 * (slab.x + slab.y)) * dir)) discard;
     f_color = segmentColor(origin, dir, slab.x, slab.y);
 #else
     float t_near = sliceT(k + 1, cos_theta);
@@ -126,6 +137,8 @@ void main() {
     for (int i = k - 1; i <= k + 2; ++i) {
         if (sliceInside(i, sliceT(i, cos_theta), range)) discard;
     }
+    // bricks: the chord is the brick's that owns its midpoint (its halo holds the rest)
+    if (!OWNED(origin + (0.5 * (range.x + range.y)) * dir)) discard;
     f_color = chordColor(origin, dir, range.x, range.y, u_step);
     if (f_color == vec4(0.0)) discard;  // emission-only segments have alpha 0
 }

@@ -16,6 +16,7 @@
 #include "common/linear_segment.glsl"
 
 uniform sampler2D t_reduced;   // (value or integral, length, 0, covered)
+uniform bool u_rows_top_down;  // the image read back next: its row 0 (the top) stored first
 #if GEOMETRY
 uniform sampler2D t_surface;   // the first surface's lit colour and t (3e38: none)
 #endif
@@ -24,11 +25,13 @@ out vec4 frag_color;
 vec4 classified(vec4 r);
 
 void main() {
-    vec4 r = texelFetch(t_reduced, ivec2(gl_FragCoord.xy), 0);
+    ivec2 pixel = ivec2(gl_FragCoord.xy);
+    if (u_rows_top_down) pixel.y = textureSize(t_reduced, 0).y - 1 - pixel.y;
+    vec4 r = texelFetch(t_reduced, pixel, 0);
     frag_color = classified(r);
 #if GEOMETRY
     // the surface under the over operator: C + (1 - A) colour, A = 1 (contract)
-    vec4 surface = texelFetch(t_surface, ivec2(gl_FragCoord.xy), 0);
+    vec4 surface = texelFetch(t_surface, pixel, 0);
     if (surface.a < 1e38) frag_color = vec4(frag_color.rgb + (1.0 - frag_color.a) * surface.rgb, 1.0);
 #endif
 }

@@ -36,6 +36,19 @@
 #ifndef GEOMETRY
 #define GEOMETRY 0       // opaque surfaces: nothing behind the pixel's first one
 #endif
+#ifndef SEGMENT_TABLE
+#define SEGMENT_TABLE 0  // segments="table": the approximate integral of model/segment_table.py
+#endif
+// The rare paths, compiled in only for meshes that have them (tetra_walk.rare_paths):
+// llvmpipe runs both sides of a branch whose condition differs from pixel to pixel, so
+// code for zero-volume cells or folded faces costs every step when present (15-25 %
+// of the frame on the NASA meshes)
+#ifndef WALK_FLAT
+#define WALK_FLAT 1      // zero-volume cells among the walked ones (flatExit)
+#endif
+#ifndef WALK_FOLDS
+#define WALK_FOLDS 1     // folded faces (foldedNext)
+#endif
 
 #include "common/camera_ray.glsl"
 #include "common/linear_segment.glsl"
@@ -60,6 +73,51 @@ uniform int u_start_cell;         // >= 0: every ray starts in this cell at t = 
 uniform int u_max_steps;
 #if GEOMETRY
 uniform sampler2D t_surface;      // the first surface's lit colour and t (3e38: none)
+#endif
+
+#if SEGMENT_TABLE
+// segments="table" (NumPy twin: model.segment_table.table_segment): the TF's cumulative
+// extinction and tau-weighted colour (row 0) and point values (row 1), ENTRIES wide
+uniform sampler2D t_segment_table;
+uniform float u_table_lo;         // value of entry 0
+uniform float u_table_hi;         // value of the last entry
+uniform float u_table_scale;      // entries per value unit
+uniform int u_table_size;
+
+vec4 tableRow(float s, int row) {
+    float u = clamp((s - u_table_lo) * u_table_scale, 0.0, float(u_table_size - 1));
+    int i0 = min(int(floor(u)), u_table_size - 2);
+    float f = u - float(i0);
+    return mix(texelFetch(t_segment_table, ivec2(i0, row), 0), texelFetch(t_segment_table, ivec2(i0 + 1, row), 0), f);
+}
+
+// row 0, continued linearly beyond the ends (the TF is constant there)
+vec4 tableCumulative(float s) {
+    vec4 inside = tableRow(s, 0);
+    float beyond = s - clamp(s, u_table_lo, u_table_hi);
+    if (beyond == 0.0) return inside;
+    vec4 end = texelFetch(t_segment_table, ivec2(beyond < 0.0 ? 0 : u_table_size - 1, 1), 0);
+    return inside + beyond * vec4(end.rgb * end.a, end.a);
+}
+
+// The tau-weighted mean colour over [s_front, s_back] times 1 - exp(-depth): no
+// attenuation inside the segment (its error is measured by the mesh pilot).
+vec4 tableSegment(float s_front, float s_back, float len) {
+    float ds = s_back - s_front;
+    vec3 c;
+    float tau;
+    if (abs(ds) * u_table_scale >= 1.0) {
+        vec4 mean = (tableCumulative(s_back) - tableCumulative(s_front)) / ds;
+        tau = mean.a;
+        c = mean.a > 0.0 ? mean.rgb / mean.a : vec3(0.0);
+    } else {                              // within an entry: the point value at the middle
+        vec4 point = tableRow(0.5 * (s_front + s_back), 1);
+        tau = point.a;
+        c = point.rgb;
+    }
+    float alpha = 1.0 - exp(-max(tau, 0.0) * len * u_inv_unit);
+    return vec4(c * alpha, alpha);
+}
 #endif
 
 #if COMPUTE_PIXELS
@@ -191,11 +249,14 @@ void PIXEL_MAIN() {
             uint flags = texelFetch(t_flags, texelRow(cell), 0).r;
             ivec4 nb = texelFetch(t_neighbours, texelRow(cell), 0);
             int next;
+#if WALK_FLAT
             if ((flags & FLAT) != 0u) {    // no segment; out through the face holding the crossing
                 int face = flatExit(cell, origin + t_cur * dir, dir, nb, prev);
                 next = face < 0 ? -1 : nb[face];
                 ++stalled;
-            } else {
+            } else
+#endif
+            {
                 mat3x4 normals;
                 vec4 room_at_eye, along, room, t;
                 cellPlanes(cell, u_eye, normals, room_at_eye);
@@ -236,7 +297,9 @@ void PIXEL_MAIN() {
                     stalled = t_end > t_cur ? 0 : stalled + 1;
                     t_cur = max(t_cur, t_end);
                     next = t_out < 1.0e38 ? nb[face] : -1;     // none: no leaving plane but the way back
+#if WALK_FOLDS
                     if (next < 0 && (flags & FOLDS) != 0u) next = foldedNext(flags, nb, prev, origin, dir, t_cur);
+#endif
                 }
                 if (t_cur >= kept.y) {
                     done = true;
@@ -281,7 +344,11 @@ void PIXEL_MAIN() {
         vec4 seg = linearSegmentCued(s_front, s_back, (b - a) * scale, q_front, q_back, cued_alpha);
         seg.rgb = seg.rgb * factor + added * cued_alpha;
   #else
+    #if SEGMENT_TABLE
+        vec4 seg = tableSegment(s_front, s_back, b - a);
+    #else
         vec4 seg = linearSegment(s_front, s_back, b - a);
+    #endif
   #endif
   #if OPTICAL_MODEL == 2
         seg.a = 0.0;          // emission only: colours add, nothing absorbs

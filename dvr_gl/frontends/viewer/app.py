@@ -25,6 +25,7 @@ import time
 import numpy as np
 
 from ...model.scene import Scene
+from ...rendering.pyramid import MOVING_SAMPLES, has_pyramid, moving_volume, settings as pyramid_settings
 from .choices import move_iso, next_mode, next_sort, next_technique, scale_step, switch_option
 from .controls import Controls, connect
 from .frames import Presenter
@@ -49,6 +50,7 @@ class Viewer:
     max_accumulate = 64   # particles: sets averaged at most while the view stays still
     coarse_scale = 0.5    # resolution while interacting
     coarse_step = 2.0     # step multiplier while interacting
+    moving_samples = MOVING_SAMPLES   # a pyramid's level while interacting: the finest this small
     double_click_s = 0.35
 
     def __init__(self, settings: Settings):
@@ -224,6 +226,15 @@ class Viewer:
         if self.accumulates():
             options["repetitions"] = 1 if coarse else self.accumulated
         scene = self._scene(width, height)
+        if self.technique == "raycast" and has_pyramid(scene):     # a multiscale store (rendering.pyramid)
+            if coarse:       # moving: one coarse level, its step as many of its voxels
+                level = moving_volume(scene.volume, self.moving_samples)
+                step = None if step is None else step * level.min_spacing / scene.volume.min_spacing
+                return scene.replace(volume=level), self.technique, step, options
+            if tolerance and self.tolerance is not None:    # still: the level (and step) chosen for it
+                scene, step, options, self.renderer.last_choice = pyramid_settings(
+                    self.renderer, scene, self.tolerance, "raycast", options)
+                return scene, self.technique, step, options
         if tolerance and self.tolerance is not None and self.technique == "raycast" and not coarse:
             # progressive: coarse frames while the view moves, then the step (and
             # way of sampling) the error model picks for the tolerance, once it is still
