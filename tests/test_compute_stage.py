@@ -97,6 +97,12 @@ def test_compute_walk_is_the_constant_box(ctx, renderer, split, view):
     frag = renderer.render(scene, "tetra", sort="walk", stage="fragment")
     if is_llvmpipe(renderer):
         assert np.array_equal(img, frag)
+    # convex: one layer, and the pass that finds no entry ends the peeling (an occlusion
+    # query that counted discarded fragments would peel on to the cap)
+    plan = tetra.make_plan(scene, sort="walk", stage="compute", tables=renderer.tables)
+    with current(renderer.ctx):
+        tetra.draw(renderer, plan)
+    assert plan.walk_passes == 1 and plan.walk_left == 0
 
 
 def test_compute_walk_on_the_ball_matches_the_twin(renderer):

@@ -197,6 +197,30 @@ def test_the_rare_paths_are_compiled_in_where_the_mesh_has_them():
     assert tetra_walk.rare_paths(folded) == {"WALK_FLAT": 0, "WALK_FOLDS": 1}
 
 
+def test_opacity_one_code_is_compiled_in_per_tf(renderer, monkeypatch):
+    """The segment integral's code for opacity 1 (a piece that ends the ray; graded parts
+    towards a knot of opacity 1) is compiled in only for TFs that have such a knot
+    (SEG_OPAQUE, common/linear_segment.glsl), as llvmpipe runs it masked on every segment
+    otherwise. Without it the image is the same to the bit; with it the ball is drawn as
+    exact draws it, the rays ending in the opaque band."""
+    from dvr_gl.model.transfer import SegmentKnots
+    scene = _ball(size=32)
+    assert tetra.opaque_knots(SegmentKnots(scene.tf)) == 0
+    img, plan = walk(renderer, scene)
+    assert plan.defines["SEG_OPAQUE"] == 0
+    monkeypatch.setattr(tetra, "opaque_knots", lambda knots: 1)
+    forced, plan = walk(renderer, scene)
+    assert plan.defines["SEG_OPAQUE"] == 1 and np.array_equal(img, forced)
+    monkeypatch.undo()
+    opaque = TransferFunction([(0.0, 0.2, 0.4, 0.9), (1.0, 0.9, 0.3, 0.1)],
+                              [(0.0, 0.0), (0.45, 0.2), (0.6, 1.0), (0.75, 0.3), (1.0, 0.1)], unit_distance=1.0)
+    scene = scene.replace(tf=opaque)
+    img, plan = walk(renderer, scene)
+    assert plan.defines["SEG_OPAQUE"] == 1
+    assert np.abs(img - reference.exact(scene)).max() < GL_TOL
+    assert img[..., 3].max() > 1.0 - 1e-6     # some rays reach the opaque band
+
+
 def _ball(view="perspective", mode="composite", size=48, **extra):
     mesh = delaunay_ball()
     lo, hi = mesh.bounds

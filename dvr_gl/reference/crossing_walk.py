@@ -1,7 +1,8 @@
 """NumPy twin of the walk by crossings (``shaders/common/crossing_walk.glsl``, a ray-casting
 plan with ``refine_walk="crossings"``; ``dvr_gl.techniques.crossing_walk``), in float64:
-the same cells passed over, the same cubics from the same corners, the same bisections
-and pieces, read from the same pre-integrated table."""
+the same cells passed over, the same cubics from the same corners (the shader's from
+their trilinear coefficients, stored in float32), the same crossings and pieces, read
+from the same pre-integrated table."""
 
 from __future__ import annotations
 
@@ -77,7 +78,7 @@ def crossing_of(c, u, s, u_end, s_end, target):
 
 
 def next_crossing(c, u, s, u_end, s_end, knots, tol):
-    """Twin of ``nextCrossing``."""
+    """Twin of ``nextCrossing``: (u there, the value there: the knot where one was crossed)."""
     up = np.where(s_end >= s, 1.0, -1.0)
     target = np.zeros_like(u)
     found = np.zeros(u.shape, bool)
@@ -86,7 +87,7 @@ def next_crossing(c, u, s, u_end, s_end, knots, tol):
         take = ahead & (~found | ((knot - target) * up < 0))
         target = np.where(take, knot, target)
         found |= take
-    return np.where(found, crossing_of(c, u, s, u_end, s_end, target), u_end)
+    return np.where(found, crossing_of(c, u, s, u_end, s_end, target), u_end), np.where(found, target, s_end)
 
 
 def _box_exit(o, d, spacing, lo, hi):
@@ -190,7 +191,7 @@ def render_plan(plan):
             edge = np.where(sl < lo_s, lo_s, hi_s)
             enters = (s_turn - edge) * (sl - edge) <= 0
             moved = np.where(enters, crossing_of(cl, ul, sl, u_turn, s_turn, edge), u_turn)
-            moved_s = np.where(moved == u_turn, s_turn, cubic_at(cl, moved))
+            moved_s = np.where(enters, edge, s_turn)
             ul = np.where(outside, moved, ul)
             sl = np.where(outside, moved_s, sl)
             piece_rows = ~outside | enters
@@ -206,8 +207,7 @@ def render_plan(plan):
                 cp, up, sp, spn = cl[p], ul[p], sl[p], span[rp]
                 u_end = np.minimum(u_turn[p], up + cw.part / spn)
                 s_end = np.where(u_end == u_turn[p], s_turn[p], cubic_at(cp, u_end))
-                u_next = next_crossing(cp, up, sp, u_end, s_end, cw.knots, tol)
-                s_next = np.where(u_next == u_end, s_end, cubic_at(cp, u_next))
+                u_next, s_next = next_crossing(cp, up, sp, u_end, s_end, cw.knots, tol)
                 length = (u_next - up) * spn
                 shift = (4.0 * cubic_at(cp, 0.5 * (up + u_next)) - 2.0 * (sp + s_next)) / 6.0
                 piece = plan.preint_fine.segment(sp + shift, s_next + shift, length)
@@ -220,7 +220,10 @@ def render_plan(plan):
                 ahead = np.stack([e_end[lp], np.where(a2p > u_next, e2[lp], e_end[lp]),
                                   np.where(a1p > u_next, e1[lp], e_end[lp])])
                 returns = np.where(s_next < lo_s, ahead.max(axis=0) >= lo_s, ahead.min(axis=0) <= hi_s)
-                u[lp] = np.where(in_support(s_next) | returns, u_next, 1.0)
+                s_ahead = np.where(a1p > u_next, e1[lp], np.where(a2p > u_next, e2[lp], e_end[lp]))
+                leaving = (((s_next >= hi_s - tol) & (s_ahead > s_next))
+                           | ((s_next <= lo_s + tol) & (s_ahead < s_next)))
+                u[lp] = np.where((in_support(s_next) & ~leaving) | returns, u_next, 1.0)
                 s[lp] = s_next
             live = live[u[live] < 1.0]
         acc[rows] = cell_acc

@@ -7,7 +7,8 @@ trilinear field is a cubic in each cell, and a narrow opacity band is crossed wh
 cubic passes through the band's values. This walk goes from cell to cell: cells whose
 corner values reach no value with opacity are passed over many at a time (a Chebyshev
 distance map over the cells: a ray leaves the whole empty box around its cell in one
-round); in the others the cubic is made from the eight corners and the cell's stretch
+round); in the others the cubic is made from the cell's trilinear coefficients (stored
+for those cells only, two texture reads) and the cell's stretch
 of ray is cut where it turns and where it crosses a knot of the TF, every piece at most
 ``step / refine`` long (the parameter the error shrinks with), each read from the
 pre-integrated table of that length with the cubic's values at its ends. The TF is one
@@ -33,6 +34,8 @@ class CrossingPlan:
     part: float                # the longest piece, world units
     rounds: int                # a bound on one ray's rounds
     tol: float                 # values this close to a knot count as on it (float32 rounding)
+    walk_map: np.ndarray = None       # float32 per cell: the distance, or -n in visible cell n
+    coefficients: np.ndarray = None   # (rows, 2 COEFFICIENT_ROW, 4) float32 (walk_cells)
 
 
 def knot_values(tf):
@@ -87,6 +90,46 @@ def cell_ranges(volume):
     return lo, hi
 
 
+COEFFICIENT_ROW = 2048   # cells per row of the coefficient texture (two texels each)
+MAX_VISIBLE_CELLS = 1 << 24   # cell indices stay exact in the float32 walk map
+
+
+def cell_coefficients(volume, cells):
+    """The trilinear field's eight coefficients in each of ``cells`` (n, 3 as z, y, x),
+    float32 (n, 8): the constant, the x, y, z terms, then the xy, xz, yz and xyz terms,
+    so that a cell's cubic takes two texture reads instead of eight corners."""
+    v = volume.values(np.float64)
+    k, j, i = cells.T
+
+    def corner(dz, dy, dx):
+        return v[k + dz, j + dy, i + dx]
+    v000, v100, v010, v110 = corner(0, 0, 0), corner(0, 0, 1), corner(0, 1, 0), corner(0, 1, 1)
+    v001, v101, v011, v111 = corner(1, 0, 0), corner(1, 0, 1), corner(1, 1, 0), corner(1, 1, 1)
+    return np.stack([v000, v100 - v000, v010 - v000, v001 - v000,
+                     v110 - v100 - v010 + v000, v101 - v100 - v001 + v000, v011 - v010 - v001 + v000,
+                     v111 - v110 - v101 - v011 + v100 + v010 + v001 - v000], axis=1).astype(np.float32)
+
+
+def walk_cells(volume, tf, table, occupancy):
+    """(empty_reach's distances, the walk map, the coefficient texture). The walk map is
+    the distance where it is positive and -n in the n-th cell that may show something;
+    the coefficient texture (rows of COEFFICIENT_ROW cells, RGBA32F) holds those cells'
+    coefficients, cell n at texels 2 (n % COEFFICIENT_ROW) and the one after, row
+    n // COEFFICIENT_ROW: 32 bytes per visible cell only (every cell's would be 8x a
+    float32 volume)."""
+    reach = empty_reach(volume, tf, table, occupancy)
+    visible = np.flatnonzero(reach.ravel() <= 0)
+    if visible.size > MAX_VISIBLE_CELLS:
+        raise ValueError(f"refine_walk='crossings' takes at most {MAX_VISIBLE_CELLS} cells whose values may "
+                         f"have opacity, got {visible.size}")
+    walk_map = reach.copy()
+    walk_map.ravel()[visible] = -np.arange(visible.size, dtype=np.float32)
+    rows = max(-(-visible.size // COEFFICIENT_ROW), 1)
+    texels = np.zeros((rows * COEFFICIENT_ROW, 8), np.float32)
+    texels[:visible.size] = cell_coefficients(volume, np.stack(np.unravel_index(visible, reach.shape), axis=1))
+    return reach, walk_map, texels.reshape(rows, 2 * COEFFICIENT_ROW, 4)
+
+
 def empty_reach(volume, tf, table, occupancy):
     """Per cell, float32: the Chebyshev distance in cells to the nearest cell that may
     show something (0: this one may), a cell showing nothing when no value within one
@@ -112,16 +155,18 @@ def plan_walk(scene, step, refine, preint_fine, tables, defines, refine_walk, oc
     if min(volume.shape) < 2:
         raise ValueError(f"refine_walk='crossings' needs two samples along every axis, got shape {volume.shape}")
     knots = tables.get("crossing_knots", scene.tf, make=knot_values)
-    reach = tables.get("crossing_empty_reach", volume, scene.tf, preint_fine,
-                       make=lambda v, tf, table: empty_reach(v, tf, table, occupancy))
+    reach, walk_map, coefficients = tables.get(
+        "crossing_walk_cells", volume, scene.tf, preint_fine,
+        make=lambda v, tf, table: walk_cells(v, tf, table, occupancy))
     part = step / refine
     cells = int(np.sum(np.array(volume.shape) - 1)) + 3
     diagonal = float(np.linalg.norm(volume.spacing))
     per_cell = 3 * (len(knots) + 2) + int(np.ceil(diagonal / part)) + 2
-    defines.update(CROSSING_WALK=1, KNOT_COUNT=max(len(knots), 1))
+    defines.update(CROSSING_WALK=1, KNOT_COUNT=max(len(knots), 1), CW_COEFFICIENT_ROW=COEFFICIENT_ROW)
     scale = max(np.abs(knots).max(initial=0.0), *np.abs(np.nan_to_num(volume.data_range)))
     return CrossingPlan(knots=knots, support=support(scene.tf), empty_reach=reach, part=part,
-                        rounds=min(cells * (per_cell + 1), 1 << 24), tol=float(2.0 ** -20 * scale))
+                        rounds=min(cells * (per_cell + 1), 1 << 24), tol=float(2.0 ** -20 * scale),
+                        walk_map=walk_map, coefficients=coefficients)
 
 
 def add_inputs(renderer, plan, textures, uniforms):
@@ -133,9 +178,17 @@ def add_inputs(renderer, plan, textures, uniforms):
     if crossings is None:
         return
     from ..gl.resources import texture3d
-    textures["t_empty_reach"] = renderer.resources.for_objects(
-        "crossing_empty_reach", crossings.empty_reach,
-        make=lambda: texture3d(renderer.ctx, crossings.empty_reach, 1, "f4", linear=False))
+
+    def texture2d(ctx, texels):
+        tex = ctx.texture(texels.shape[1::-1], 4, np.ascontiguousarray(texels).tobytes(), dtype="f4")
+        tex.filter = (ctx.NEAREST, ctx.NEAREST)
+        return tex
+    textures["t_walk_map"] = renderer.resources.for_objects(
+        "crossing_walk_map", crossings.walk_map,
+        make=lambda: texture3d(renderer.ctx, crossings.walk_map, 1, "f4", linear=False))
+    textures["t_cell_coefficients"] = renderer.resources.for_objects(
+        "crossing_cell_coefficients", crossings.coefficients,
+        make=lambda: texture2d(renderer.ctx, crossings.coefficients))
     knots = crossings.knots if len(crossings.knots) else np.array([np.inf])
     big = 3.0e38
     uniforms.update({"u_knots": np.clip(knots, -big, big).astype(np.float32).tobytes(),

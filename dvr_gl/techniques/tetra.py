@@ -214,7 +214,7 @@ def make_plan(scene, step=None, *, sort="auto", target="rgba32f", stage="auto", 
         # size, on which the per-pixel gap constraints depend)
         result = tables.get(f"tetra_order:{sort}:{scene.width}x{scene.height}", mesh, tf, scene.camera, make=order)
         draw = drawn(result)
-    defines = {"KNOT_CAPACITY": knot_capacity(knots.count), **clip_defines(scene)}
+    defines = {"KNOT_CAPACITY": knot_capacity(knots.count), "SEG_OPAQUE": opaque_knots(knots), **clip_defines(scene)}
     if scene.camera.is_ortho:
         defines["ORTHO"] = 1
     if scene.geometry:
@@ -241,6 +241,13 @@ def knot_capacity(count):
     if count > MAX_KNOTS:
         raise ValueError(f"tf has {count} control-point positions; tetra takes at most {MAX_KNOTS}")
     return max(4, 1 << (count - 1).bit_length())
+
+
+def opaque_knots(knots):
+    """SEG_OPAQUE of common/linear_segment.glsl: 1 where a knot of ``knots`` (a
+    SegmentKnots) has opacity 1 (its float32 transparency 0, as the shader reads it), else
+    0 and the segment integral leaves out the code for opacity 1."""
+    return int(bool((knots.texture_rows()[1, :, 1] <= 0.0).any()))
 
 
 # ---------------------------------------------------------------------------------------

@@ -16,12 +16,17 @@ Per view, the CPU uploads a camera; then, per layer of depth peeling:
    test, not rasterisation's: a face seen edge-on keeps its pixels), each fragment
    finding where its pixel's ray crosses the face's plane going in, inside the face's
    triangle; the first draw keeps the nearest such t beyond where the pixel's last walk
-   stopped (MIN blending, exact), the second the smallest cell at exactly that t. An
-   occlusion query on the first draw says whether any pixel has an entry left: if none,
-   peeling stops there, without the second draw. The layers the last frame drew are drawn without reading their
-   queries (reading one waits for the GPU), so a frame like the last waits once.
-2. walk pass (``walk.frag``, full screen): from its entry, each pixel's ray goes from
-   cell to cell through the face adjacency; in each cell the segment is tetra's own
+   stopped (MIN blending, exact), the second the smallest cell at exactly that t. Between
+   them a full-screen pass (``walk_mark.frag``) marks the pixels that have an entry in a
+   depth buffer (``layer_depth``, falling by layer), counting them (an occlusion query):
+   if none, peeling stops there, without the second draw. The layers the last frame drew
+   are drawn without reading their queries (reading one waits for the GPU), so a frame
+   like the last waits once. Both draws test the marks before shading (early), so later
+   layers shade only the few pixels that still walk.
+2. walk pass (``walk.frag``, a full-screen triangle tested against the marks: the pixels
+   with an entry in the last layer (the first: in this one); llvmpipe skips the blocks
+   of pixels without one): from its entry, each pixel's ray goes from cell to cell
+   through the face adjacency; in each cell the segment is tetra's own
    (largest entering and smallest leaving plane crossing, the same float32 arithmetic),
    cut to the clip's kept interval and at the first opaque surface, integrated exactly
    (``common/linear_segment.glsl``) and composited front to back. Leaving through a
@@ -69,6 +74,16 @@ MAX_PASSES = 64            # layers of depth peeling (entries along one ray) at 
 HIDDEN_FRACTION = 0.5      # walk only the cells the TF shows where it hides this share (walked_cells)
 MAX_CELLS = 1 << 24        # cell numbers travel as float32 (MIN blending): exact below 2^24
 NO_ENTRY = 3.0e38
+MARK_LEVELS = 128          # the layers' window depths (layer_depth) are 1/MARK_LEVELS apart
+MARK_GAP = 0.5 / MARK_LEVELS   # a test depth halfway to the last layer's: rounding-proof
+
+
+def layer_depth(layer):
+    """The window depth of the pixels that have an entry in ``layer``: falling by layer, so
+    that ``depth <= layer_depth(L - 1)`` (the depth test) keeps the pixels marked in layer
+    L - 1 or later: after the first layer, a pixel pass walks only those (they are fewer
+    each layer, as a pixel without an entry has none in any later layer)."""
+    return 1.0 - (layer + 1) / MARK_LEVELS
 
 
 class WalkUnsupported(ValueError):
@@ -245,16 +260,27 @@ class WalkTargets:
             return t
         self.acc = [tex(4), tex(4)]
         self.state = [tex(4), tex(4)]
-        self.layers = [ctx.framebuffer([self.acc[i], self.state[i]]) for i in range(2)]
+        # the layers' marks (layer_depth): written by the entry pass, tested by the next pixel pass
+        self.marks = ctx.depth_renderbuffer((width, height))
+        self.layers = [ctx.framebuffer([self.acc[i], self.state[i]], self.marks) for i in range(2)]
+        for fbo in self.layers:
+            fbo.depth_mask = False
         self.acc_only = [ctx.framebuffer([t]) for t in self.acc]
         self.state_only = [ctx.framebuffer([t]) for t in self.state]
         self.entry_t, self.entry_cell = tex(1), tex(1)
         self.entry_t_fbo = ctx.framebuffer([self.entry_t])
+        self.entry_marked_fbo = ctx.framebuffer([self.entry_t], self.marks)
+        self.entry_cell_marked_fbo = ctx.framebuffer([self.entry_cell], self.marks)
+        self.marks_fbo = ctx.framebuffer([], self.marks)
+        for fbo in (self.entry_marked_fbo, self.entry_cell_marked_fbo):
+            fbo.depth_mask = False
         self.entry_cell_fbo = ctx.framebuffer([self.entry_cell])
 
     def release(self):
-        for fbo in (*self.layers, *self.acc_only, *self.state_only, self.entry_t_fbo, self.entry_cell_fbo):
+        for fbo in (*self.layers, *self.acc_only, *self.state_only, self.entry_t_fbo, self.entry_marked_fbo,
+                    self.entry_cell_fbo, self.entry_cell_marked_fbo, self.marks_fbo):
             fbo.release()
+        self.marks.release()
         for t in (*self.acc, *self.state, self.entry_t, self.entry_cell):
             t.release()
 
@@ -298,12 +324,13 @@ def draw(renderer, plan, data, texture):
         if walked is not None and start >= 0 and not walked[start]:
             start = -1       # the eye in a cell not walked: rays start at their first entry
     view = {"ORTHO": 1} if scene.camera.is_ortho else {}
-    entry_prog = renderer.programs.get("tetra/walk_entry.vert", "tetra/walk_entry.frag", view,
-                                       geometry="tetra/walk_entry.geom")
     compute = pixel_stage(renderer, plan.stage) == "compute"
+    entry_prog = renderer.programs.get("tetra/walk_entry.vert", "tetra/walk_entry.frag",
+                                       dict(view, MARKED=0) if compute else view, geometry="tetra/walk_entry.geom")
+    mark_prog = renderer.programs.get("tetra/walk_layer.vert", "tetra/walk_mark.frag")
     walk_defines = {**plan.defines, **renderer.tables.get("tetra_walk_rare_paths", mesh, make=rare_paths)}
     walk_prog = (renderer.programs.compute("tetra/walk.frag", walk_defines) if compute else
-                 renderer.programs.get("tetra/fullscreen.vert", "tetra/walk.frag", walk_defines))
+                 renderer.programs.get("tetra/walk_layer.vert", "tetra/walk.frag", walk_defines))
     view_proj = data_projection(scene, near=None if scene.camera.is_ortho else
                                 1e-6 * float(np.linalg.norm(mesh.extent))).astype("f4").tobytes()
     cam = camera_uniforms(scene)
@@ -329,10 +356,15 @@ def draw(renderer, plan, data, texture):
     query = renderer.resources.get("tetra_walk_query", "samples", lambda: ctx.query(samples=True), capacity=None)
 
     ctx.disable(ctx.DEPTH_TEST | ctx.CULL_FACE | ctx.BLEND)
-    targets.acc_only[0].use()
-    targets.acc_only[0].clear(-3.0e38 if scene.mode in ("mip", "minip") else 0.0, 0.0, 0.0, 0.0)
-    targets.state_only[0].use()
-    targets.state_only[0].clear(0.0, -1.0, 0.0, 0.0)     # stopped at t = 0, no entry yet
+    for i in range(2):      # both: a pixel without an entry is never walked (not even copied)
+        targets.acc_only[i].use()
+        targets.acc_only[i].clear(-3.0e38 if scene.mode in ("mip", "minip") else 0.0, 0.0, 0.0, 0.0)
+        targets.state_only[i].use()
+        targets.state_only[i].clear(0.0, -1.0, 0.0, 0.0)     # stopped at t = 0, no entry yet
+    # every pixel walks in the first layer from the eye's cell
+    targets.marks_fbo.clear(depth=layer_depth(0) if start >= 0 else 1.0)
+    # the marks serve the fragment stage's early depth test; a compute pass has none
+    marker = None if compute else (mark_prog, empty_vao(renderer, mark_prog))
     src = 0
     # as many layers as the last frame drew are drawn without waiting for their entry
     # counts (a layer without entries leaves every pixel as it was): one wait a frame
@@ -343,7 +375,7 @@ def draw(renderer, plan, data, texture):
             starting = layer == 0 and start_vao is not None
             count = "pixels" if layer == MAX_PASSES else layer >= counted_from
             if _entries(ctx, entry_prog, faces, walk, data, flags, targets, src, query,
-                        start_vao if starting else None, count) == 0 and count:
+                        start_vao if starting else None, count, layer, marker) == 0 and count:
                 break
             if layer == MAX_PASSES:         # the cap: what is left is counted, not walked
                 plan.walk_left = int(query.samples)
@@ -363,8 +395,21 @@ def draw(renderer, plan, data, texture):
             walk_prog["u_target_size"].value = (width, height)
             walk_prog.run((width + 7) // 8, (height + 7) // 8)
             ctx.memory_barrier()
-        else:
+        elif first_from_eye:
             empty_vao(renderer, walk_prog).render(ctx.TRIANGLES, vertices=3)
+        else:
+            # only the pixels that had an entry in the last layer (the first: in this one):
+            # those that have one in this layer, and those whose walk ended in the last
+            # (their result is copied into this layer's targets, as the layer after skips
+            # them). The test is early (walk.frag neither discards nor writes depth):
+            # llvmpipe then skips the blocks without such pixels, and runs the walk's loops
+            # for those it has only.
+            ctx.enable(ctx.DEPTH_TEST)
+            ctx.depth_func = ">="
+            walk_prog["u_layer_depth"].value = layer_depth(max(layer - 1, 0)) + MARK_GAP
+            empty_vao(renderer, walk_prog).render(ctx.TRIANGLES, vertices=3)
+            ctx.disable(ctx.DEPTH_TEST)
+            ctx.depth_func = "<"
         src = dst
         plan.walk_passes += 1
     walk.layers_drawn = plan.walk_passes
@@ -453,14 +498,18 @@ class _StartFaces:
             self.buffer = None
 
 
-def _entries(ctx, prog, faces, walk, data, flags, targets, src, query, start=None, count=True):
-    """The entry pass: each pixel's nearest eligible entry (t, then the smallest cell at
-    that t) into ``targets.entry_t`` and ``entry_cell``; returns the pixels that have one
-    (samples of the second draw) with ``count="pixels"``; with ``count`` True 0 where none
-    has one (the first draw kept no fragment: the second is then not drawn), else the
-    first draw's kept fragments; None unless ``count`` (a count waits for the GPU).
-    ``start``: (vertex array, vertices) of the start faces (orthographic rays that start
-    inside the mesh), drawn too."""
+def _entries(ctx, prog, faces, walk, data, flags, targets, src, query, start=None, count=True, layer=0,
+             marker=None):
+    """The entry pass of ``layer``: each pixel's nearest eligible entry (t, then the
+    smallest cell at that t) into ``targets.entry_t`` and ``entry_cell``, and the pixels
+    that have one marked at ``layer_depth(layer)`` in ``targets.marks`` (``marker``: the
+    marking program and its vertex array; None: no marks, for the compute stage's walk).
+    Returns those pixels' count with ``count`` (0: none, and the second draw is then not
+    made; a count waits for the GPU), else None.
+    After the first layer both draws test the marks early (walk_entry.frag), so that only
+    the pixels marked in the last layer (the first draw) or in this one (the second) are
+    shaded. ``start``: (vertex array, vertices) of the start faces (orthographic rays that
+    start inside the mesh), drawn too."""
 
     def render(pick):
         bind(prog, {}, {"u_pick_cell": pick, "u_start_faces": False})
@@ -469,18 +518,46 @@ def _entries(ctx, prog, faces, walk, data, flags, targets, src, query, start=Non
             bind(prog, {}, {"u_start_faces": True})
             start[0].render(ctx.TRIANGLES, vertices=start[1])
 
-    ctx.enable(ctx.BLEND)
-    ctx.blend_func = ctx.ONE, ctx.ONE
-    ctx.blend_equation = ctx.MIN
+    def entry_blending():
+        ctx.enable(ctx.BLEND)
+        ctx.blend_func = ctx.ONE, ctx.ONE
+        ctx.blend_equation = ctx.MIN
+
+    def depth_test(func):
+        ctx.enable(ctx.DEPTH_TEST)
+        ctx.depth_func = func
+
+    entry_blending()
     textures = {"t_planes": data.planes, "t_flags": flags, "t_state": targets.state[src],
                 "t_nearest": targets.entry_t}
+    masked = marker is not None
     try:
         targets.entry_t_fbo.use()
         targets.entry_t_fbo.clear(NO_ENTRY, NO_ENTRY, NO_ENTRY, NO_ENTRY)
+        if masked and layer > 0:
+            depth_test(">=")      # the pixels marked in the last layer
+        (targets.entry_marked_fbo if masked else targets.entry_t_fbo).use()
         # t_nearest is not read in this draw; bound to a texture not drawn into
-        bind(prog, dict(textures, t_nearest=targets.entry_cell), {})
-        if count:       # the first draw's kept fragments: 0 when no ray has an entry left,
-            with query:  # and the second draw is then not needed (the last layer's pass)
+        bind(prog, dict(textures, t_nearest=targets.entry_cell),
+             {"u_test_depth": layer_depth(layer - 1) + MARK_GAP if layer > 0 else 0.5})
+        if masked:
+            render(False)
+            # mark the pixels that have an entry (and count them)
+            ctx.disable(ctx.BLEND)
+            depth_test("1")
+            mark_prog, mark_vao = marker
+            targets.marks_fbo.use()
+            bind(mark_prog, {"t_entry_t": targets.entry_t}, {"u_layer_depth": layer_depth(layer)})
+            if count:
+                with query:
+                    mark_vao.render(ctx.TRIANGLES, vertices=3)
+                if query.samples == 0:
+                    return 0
+            else:
+                mark_vao.render(ctx.TRIANGLES, vertices=3)
+            entry_blending()
+        elif count:     # no marks: the first draw's kept fragments, 0 when no ray has an entry
+            with query:
                 render(False)
             if query.samples == 0:
                 return 0
@@ -488,17 +565,21 @@ def _entries(ctx, prog, faces, walk, data, flags, targets, src, query, start=Non
             render(False)
         targets.entry_cell_fbo.use()
         targets.entry_cell_fbo.clear(NO_ENTRY, NO_ENTRY, NO_ENTRY, NO_ENTRY)
-        bind(prog, textures, {})
-        if count != "pixels":
-            render(True)
-            return query.samples if count else None
-        with query:
+        if masked:
+            depth_test(">=")          # the pixels just marked
+        (targets.entry_cell_marked_fbo if masked else targets.entry_cell_fbo).use()
+        bind(prog, textures, {"u_test_depth": layer_depth(layer) + MARK_GAP})
+        if count == "pixels" and not masked:
+            with query:               # the pixels left at the cap: the second draw's fragments
+                render(True)
+        else:
             render(True)
     finally:
-        ctx.disable(ctx.BLEND)
+        ctx.disable(ctx.BLEND | ctx.DEPTH_TEST)
+        ctx.depth_func = "<"
         ctx.blend_equation = ctx.FUNC_ADD
         ctx.blend_func = ctx.ONE, ctx.ONE_MINUS_SRC_ALPHA
-    return query.samples
+    return query.samples if count else None
 
 
 def walk_counts(renderer, plan):

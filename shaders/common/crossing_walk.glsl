@@ -2,14 +2,15 @@
 // reference.crossing_walk). The ray goes from cell to cell of the trilinear field. A cell
 // whose corner values reach no value with opacity (a bound: the trilinear field stays
 // within its corners' range) is passed over together with every cell around it that is
-// just as empty: t_empty_reach holds, per cell, the Chebyshev distance in cells to the
+// just as empty: t_walk_map holds, per cell, the Chebyshev distance in cells to the
 // nearest cell that may show anything, so the ray leaves that whole box in one round. In
 // a cell that may show something the field along the ray is one cubic, made from the
-// eight corners; the cell's stretch of ray is cut where the cubic turns (so each piece is
-// monotone) and where it crosses a knot of the TF (so the TF is one line over each
-// piece), each piece at most u_cw_part long, and each read from the pre-integrated table
-// of that length (the fine rows) with the cubic's values at its ends. A narrow opacity
-// band is then crossed in a few exact places however large the step.
+// trilinear coefficients stored for that cell (two reads, not eight corners); its stretch
+// of ray is cut where the cubic turns (so each piece is monotone) and where it crosses a
+// knot of the TF (so the TF is one line over each piece), each piece at most u_cw_part
+// long, and each read from the pre-integrated table of that length (the fine rows) with
+// the cubic's values at its ends. A narrow opacity band is then crossed in a few exact
+// places however large the step.
 #ifndef DVR_CROSSING_WALK_GLSL
 #define DVR_CROSSING_WALK_GLSL
 
@@ -18,8 +19,14 @@
 #endif
 #define CW_NEWTON 3             // Newton steps to a crossing
 
-uniform sampler3D t_empty_reach;   // R32F per cell: Chebyshev distance (cells) to the nearest
-                                   // cell whose corners' range may have opacity (0: this one)
+#ifndef CW_COEFFICIENT_ROW
+#define CW_COEFFICIENT_ROW 2048  // cells per row of t_cell_coefficients (crossing_walk.COEFFICIENT_ROW)
+#endif
+uniform sampler3D t_walk_map;      // R32F per cell: > 0, the Chebyshev distance (cells) to the
+                                   // nearest cell whose corners' range may have opacity; else
+                                   // -n in the n-th such cell (crossing_walk.walk_cells)
+uniform sampler2D t_cell_coefficients;   // RGBA32F, two texels per such cell: its trilinear
+                                         // field's coefficients (crossing_walk.cell_coefficients)
 uniform float u_knots[KNOT_COUNT]; // the TF's knots where opacity or the colour it weighs bends
 uniform vec2 u_support;            // values outside (x, y) have zero opacity
 uniform float u_cw_part;           // the longest piece, world units
@@ -32,25 +39,15 @@ float cubicAt(vec4 c, float u) {
     return c.x + u * (c.y + u * (c.z + u * c.w));
 }
 
-// The trilinear field of cell `cell` along x(u) = xa + u (xb - xa) (cell-local
-// coordinates), u in [0, 1], as a cubic in u.
-vec4 cellCubic(ivec3 cell, vec3 xa, vec3 xb) {
-    ivec3 last = textureSize(t_volume, 0) - 1;
-    ivec3 b = min(cell + 1, last);
-    float v000 = texelFetch(t_volume, cell, 0).r;
-    float v100 = texelFetch(t_volume, ivec3(b.x, cell.y, cell.z), 0).r;
-    float v010 = texelFetch(t_volume, ivec3(cell.x, b.y, cell.z), 0).r;
-    float v110 = texelFetch(t_volume, ivec3(b.x, b.y, cell.z), 0).r;
-    float v001 = texelFetch(t_volume, ivec3(cell.x, cell.y, b.z), 0).r;
-    float v101 = texelFetch(t_volume, ivec3(b.x, cell.y, b.z), 0).r;
-    float v011 = texelFetch(t_volume, ivec3(cell.x, b.y, b.z), 0).r;
-    float v111 = texelFetch(t_volume, b, 0).r;
-    // f = c0 + cx X + cy Y + cz Z + cxy XY + cxz XZ + cyz YZ + cxyz XYZ
-    float cx = v100 - v000, cy = v010 - v000, cz = v001 - v000;
-    float cxy = v110 - v100 - v010 + v000;
-    float cxz = v101 - v100 - v001 + v000;
-    float cyz = v011 - v010 - v001 + v000;
-    float cxyz = v111 - v110 - v101 - v011 + v100 + v010 + v001 - v000;
+// The trilinear field of the n-th cell that may show something along x(u) = xa + u (xb -
+// xa) (cell-local coordinates), u in [0, 1], as a cubic in u.
+vec4 cellCubic(int n, vec3 xa, vec3 xb) {
+    // f = c0 + cx X + cy Y + cz Z + cxy XY + cxz XZ + cyz YZ + cxyz XYZ (cell_coefficients)
+    ivec2 at = ivec2(2 * (n % CW_COEFFICIENT_ROW), n / CW_COEFFICIENT_ROW);
+    vec4 linear = texelFetch(t_cell_coefficients, at, 0);
+    vec4 mixed = texelFetch(t_cell_coefficients, at + ivec2(1, 0), 0);
+    float v000 = linear.x, cx = linear.y, cy = linear.z, cz = linear.w;
+    float cxy = mixed.x, cxz = mixed.y, cyz = mixed.z, cxyz = mixed.w;
     vec3 d = xb - xa;
     // products of the linear X = xa.x + u d.x, ... as (u^0, u^1, u^2) and u^3
     vec3 xy = vec3(xa.x * xa.y, xa.x * d.y + d.x * xa.y, d.x * d.y);
@@ -101,7 +98,10 @@ float crossingOf(vec4 c, float u, float s, float u_end, float s_end, float targe
 
 // The end of the piece from u (value s) that stops at the first knot the cubic crosses
 // before u_end (monotone on [u, u_end], value s_end there; crossingOf); u_end if none.
-float nextCrossing(vec4 c, float u, float s, float u_end, float s_end) {
+// s_at: the value there, the knot itself where one was crossed (not the cubic evaluated
+// in float there, which may miss the knot by more than u_cw_tol and make a piece that
+// left the support look inside it).
+float nextCrossing(vec4 c, float u, float s, float u_end, float s_end, out float s_at) {
     float up = s_end >= s ? 1.0 : -1.0;
     float target = 0.0;
     bool found = false;
@@ -113,13 +113,14 @@ float nextCrossing(vec4 c, float u, float s, float u_end, float s_end) {
             found = true;
         }
     }
+    s_at = found ? target : s_end;
     return found ? crossingOf(c, u, s, u_end, s_end, target) : u_end;
 }
 
 // The cell the ray is in just beyond t (a ten-thousandth of a cell ahead, so that a
 // point on a face counts in the cell it enters).
-ivec3 cellAhead(vec3 origin, vec3 dir, float t) {
-    vec3 index = (origin + t * dir) / u_spacing + 1e-4 * sign(dir);
+ivec3 cellAhead(vec3 origin_c, vec3 dir_c, float t) {
+    vec3 index = origin_c + t * dir_c + 1e-4 * sign(dir_c);
     return clamp(ivec3(floor(index)), ivec3(0), ivec3(u_dims) - 2);
 }
 
@@ -142,9 +143,12 @@ bool inSupport(float s) {
 // stretch outside the support in front of its piece (from turning point or cell entry
 // to the crossing into the support). llvmpipe runs a loop's body for a group of pixels
 // while any of them is in it, every branch of it for all of them: each loop holds only
-// its own work, and the pieces of a cell are read together.
+// its own work, and the pieces of a cell are read together. (A round per cell, with its
+// pieces in a loop inside it and the rest of the cell's work in loops of at most one
+// round, which llvmpipe passes over when no pixel of the group enters, was slower.)
 void crossingWalk(vec3 origin, vec3 dir, float t0, float t1, inout vec3 color, inout float alpha_acc) {
     vec3 inv_dir = 1.0 / dir;
+    vec3 origin_c = origin / u_spacing, dir_c = dir / u_spacing;   // in cells
     float t = t0;                 // the next cell's entry
     int r = 0;
     float nudge = 1e-5 * min(u_spacing.x, min(u_spacing.y, u_spacing.z));
@@ -156,14 +160,14 @@ void crossingWalk(vec3 origin, vec3 dir, float t0, float t1, inout vec3 color, i
         float u1 = 1.0, u2 = 1.0;      // the cubic's turning points in it (1: none)
         float e1 = 0.0, e2 = 0.0, e_end = 0.0;   // its values there and at the end
         for (; !shows && t < t1 && r < u_cw_rounds; ++r) {
-            ivec3 cell = cellAhead(origin, dir, t);
-            int reach = int(texelFetch(t_empty_reach, cell, 0).r);
+            ivec3 cell = cellAhead(origin_c, dir_c, t);
+            int reach = int(texelFetch(t_walk_map, cell, 0).r);
             for (; reach > 0 && t < t1 && r < u_cw_rounds; ++r) {
                 // the box of cells within reach - 1 of this one is empty (at least a
                 // hundred-thousandth of a cell on: rounding at the box's faces)
                 t = max(boxExit(origin, inv_dir, dir, cell - (reach - 1), cell + (reach - 1)), t + nudge);
-                cell = cellAhead(origin, dir, t);
-                reach = int(texelFetch(t_empty_reach, cell, 0).r);
+                cell = cellAhead(origin_c, dir_c, t);
+                reach = int(texelFetch(t_walk_map, cell, 0).r);
             }
             if (t >= t1) break;
             float t_out = boxExit(origin, inv_dir, dir, cell, cell);
@@ -172,8 +176,8 @@ void crossingWalk(vec3 origin, vec3 dir, float t0, float t1, inout vec3 color, i
             t = t_b > t_a ? t_b : max(t_out, t + nudge);
             span = t_b - t_a;
             if (span <= 0.0) continue;
-            cubic = cellCubic(cell, (origin + t_a * dir) / u_spacing - vec3(cell),
-                              (origin + t_b * dir) / u_spacing - vec3(cell));
+            cubic = cellCubic(max(-reach, 0), origin_c + t_a * dir_c - vec3(cell),
+                              origin_c + t_b * dir_c - vec3(cell));
             // the cubic lies within the range of its Bernstein coefficients on [0, 1]
             vec4 bern = vec4(cubic.x, cubic.x + cubic.y / 3.0, cubic.x + (2.0 * cubic.y + cubic.z) / 3.0,
                              cubic.x + cubic.y + cubic.z + cubic.w);
@@ -197,15 +201,15 @@ void crossingWalk(vec3 origin, vec3 dir, float t0, float t1, inout vec3 color, i
                 float edge = s < u_support.x ? u_support.x : u_support.y;
                 bool enters = (s_turn - edge) * (s - edge) <= 0.0;
                 u = enters ? crossingOf(cubic, u, s, u_turn, s_turn, edge) : u_turn;
-                s = u == u_turn ? s_turn : cubicAt(cubic, u);
+                s = enters ? edge : s_turn;
                 if (!enters) continue;
                 u_turn = u1 > u ? u1 : (u2 > u ? u2 : 1.0);
                 s_turn = u1 > u ? e1 : (u2 > u ? e2 : e_end);
             }
             float u_end = min(u_turn, u + u_cw_part / span);
             float s_end = u_end == u_turn ? s_turn : cubicAt(cubic, u_end);
-            float u_next = nextCrossing(cubic, u, s, u_end, s_end);
-            float s_next = u_next == u_end ? s_end : cubicAt(cubic, u_next);
+            float s_next;
+            float u_next = nextCrossing(cubic, u, s, u_end, s_end, s_next);
             float len = (u_next - u) * span;
             // the table's straight line moved to the cubic's mean over the piece (Simpson's
             // rule, exact for a cubic): over a piece where the TF is one line the opacity
@@ -221,7 +225,11 @@ void crossingWalk(vec3 origin, vec3 dir, float t0, float t1, inout vec3 color, i
             float ahead_hi = max(e_end, max(u2 > u ? e2 : e_end, u1 > u ? e1 : e_end));
             float ahead_lo = min(e_end, min(u2 > u ? e2 : e_end, u1 > u ? e1 : e_end));
             bool returns = s < u_support.x ? ahead_hi >= u_support.x : ahead_lo <= u_support.y;
-            u = inSupport(s) || returns ? u : 1.0;
+            // on an edge of the support and moving out of it (a piece cut at the crossing
+            // ends there): what follows up to the next turn has no opacity
+            float s_ahead = u1 > u ? e1 : (u2 > u ? e2 : e_end);
+            bool leaving = (s >= u_support.y - u_cw_tol && s_ahead > s) || (s <= u_support.x + u_cw_tol && s_ahead < s);
+            u = (inSupport(s) && !leaving) || returns ? u : 1.0;
         }
   #if EARLY_RAY_TERMINATION
         if (1.0 - alpha_acc < u_ert_transmittance) break;

@@ -16,6 +16,13 @@
 #ifndef OPTICAL_MODEL
 #define OPTICAL_MODEL 0   // 0 emission-absorption, 1 absorption only, 2 emission only
 #endif
+// 0 where no knot has opacity 1 (techniques.tetra.opaque_knots, per TF): the code for
+// a piece that reaches opacity 1 (the ray ends there; graded parts) is then left out. A
+// GPU of SIMD lanes (llvmpipe) runs a branch taken by any pixel of a group for all of
+// them, so code that is never taken still costs where the compiler cannot see it is not.
+#ifndef SEG_OPAQUE
+#define SEG_OPAQUE 1
+#endif
 
 // The transfer function's knots as uniforms (cheaper to index than a texture):
 // u_knot_color[k] = (s, r, g, b), u_knot_opacity[k] = (alpha, 1 - alpha, 0, 0)
@@ -139,11 +146,13 @@ vec4 linearSegmentCued(float s_front, float s_back, float len, float q_front, fl
         // the factor at the piece's ends (linear along the segment, as the field is)
         float qa = ds > 0.0 ? mix(q_front, q_back, abs(a - s_front) / ds) : q_front;
         float qb = ds > 0.0 ? mix(q_front, q_back, abs(b - s_front) / ds) : q_back;
+#if SEG_OPAQUE
         if (wa <= 0.0) {                       // alpha = 1 here: the ray ends
             cued_alpha += (1.0 - alpha_acc) * qa;
             compositeFrontToBack(color, alpha_acc, ca * qa, 1.0);
             break;
         }
+#endif
 #if OPTICAL_MODEL == 2
         // emission only: the integral of c tau over the piece, nothing absorbed (alpha < 1
         // everywhere: the scene refuses opacity 1)
@@ -166,7 +175,11 @@ vec4 linearSegmentCued(float s_front, float s_back, float len, float q_front, fl
             float r = (wb - wa) / wa;
             float od = opticalDepthTo(1.0, nlw, r, lu);
             float A = -expm1Accurate(-od);
+#if SEG_OPAQUE
             bool graded = wb <= 0.0;
+#else
+            const bool graded = false;         // no knot of opacity 1: wb > 0
+#endif
             int parts = graded ? SEG_GRADED_PARTS : int(clamp(ceil(od), 1.0, float(SEG_MAX_PARTS)));
             // points per part: fewer on thin pieces of nearly constant opacity (NumPy: node_count)
             float ar = abs(r);
@@ -181,32 +194,42 @@ vec4 linearSegmentCued(float s_front, float s_back, float len, float q_front, fl
                 mean = 0.5 * (n0 + n1);
                 mean_f = 0.5 * (GL_X[0] * n0 + GL_X[1] * n1);
             } else {
-                for (int p = 0; p < parts; p++) {
+                // the parts' nodes in one loop, part by part: pixels shaded together (in
+                // lockstep, as llvmpipe's lanes are) then wait for the most nodes any of
+                // them has, not for the most parts times the most points per part
+                int p = 0, i = first;
+                for (int n = 0; n < parts * count; n++, i++) {
+                    if (i == first + count) {      // the next part
+                        i = first;
+                        p++;
+                    }
                     float f0 = graded ? 1.0 - exp2(-float(p)) : float(p) / float(parts);
                     float f1 = graded ? (p == parts - 1 ? 1.0 : 1.0 - exp2(-float(p + 1))) : float(p + 1) / float(parts);
-                    for (int i = first; i < first + count; i++) {
-                        float f = f0 + GL_X[i] * (f1 - f0);
-                        float term = GL_W[i] * (f1 - f0) * nodeTerm(f, nlw, r, lu, od);
-                        mean += term;
-                        mean_f += f * term;
-                    }
+                    float f = f0 + GL_X[i] * (f1 - f0);
+                    float term = GL_W[i] * (f1 - f0) * nodeTerm(f, nlw, r, lu, od);
+                    mean += term;
+                    mean_f += f * term;
                 }
             }
             // by parts, with g = c q along the piece: C = g(0) A + integral g'(f) (T(f) - T(1))
             float dq = qb - qa;
             vec3 C = ca * qa * A + ((cb - ca) * qa + ca * dq) * mean + 2.0 * (cb - ca) * dq * mean_f;
             float Q = qa * A + dq * mean;          // the same for the opacity weighted by q
+#if SEG_OPAQUE
             if (graded) {                      // alpha = 1 at the far end: the ray ends there
                 C += exp(-od) * cb * qb;
                 Q += exp(-od) * qb;
                 A = 1.0;
             }
+#endif
             // C is already associated: composite it with the piece's opacity
             float weight = 1.0 - alpha_acc;
             color += weight * C;
             cued_alpha += weight * Q;
             alpha_acc += weight * A;
+#if SEG_OPAQUE
             if (graded) break;
+#endif
         }
         a = b;
         if ((up && a >= s_back) || (!up && a <= s_back)) break;

@@ -7,6 +7,7 @@
 // or equal to it with a larger cell than the last entry when that walk made no progress;
 // each pass thus takes a strictly later entry, and depth peeling ends.
 #version 330 core
+#extension GL_ARB_shader_image_load_store : enable
 #include "common/precise.glsl"
 
 #ifndef ORTHO
@@ -30,6 +31,17 @@ uniform bool u_start_faces;    // the faces of cells the orthographic start plan
 uniform float u_start_margin;  // how far outside a cell a start still counts (float32 rounding)
 
 out vec4 frag_value;
+// The depth test before the shader, though it discards (it writes no depth): after the
+// first layer only the pixels marked (techniques/tetra_walk.py) are shaded. Without the
+// extension the same test comes after the shader: the same image, more fragments shaded.
+// Not where nothing is marked (the compute stage's walk): an occlusion query then counts
+// this pass's fragments, and early tests would count the discarded ones too.
+#ifndef MARKED
+#define MARKED 1
+#endif
+#if MARKED && defined(GL_ARB_shader_image_load_store)
+layout(early_fragment_tests) in;
+#endif
 
 const float ENTRY_MARGIN = 1e-5;   // of the triangle's barycentric coordinates
 

@@ -26,6 +26,7 @@ uniform usampler2D t_flags;    // R8UI per cell: bit 1 (2): zero volume
 uniform vec3 u_eye;            // relative to the mesh's lower corner
 uniform vec3 u_forward;
 uniform bool u_start_faces;    // faces of cells the start plane cuts (walk_entry.frag): all drawn
+uniform float u_test_depth;    // window depth, 0 to 1, of every fragment: the marks' early test (tetra_walk.py)
 flat out int v_slot;
 flat out vec3 v_corner0;     // the face's corners (relative to the mesh's lower corner)
 flat out vec3 v_corner1;
@@ -36,7 +37,8 @@ void emit(vec4 position) {
     v_corner0 = g_position[0];
     v_corner1 = g_position[1];
     v_corner2 = g_position[2];
-    gl_Position = position;
+    // every fragment at the test depth: the marked pixels pass (walk_entry.frag)
+    gl_Position = vec4(position.xy, (2.0 * u_test_depth - 1.0) * position.w, position.w);
     EmitVertex();
 }
 
