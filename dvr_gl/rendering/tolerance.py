@@ -17,7 +17,8 @@ finest pair: the order seen between fine steps understates how fast coarse steps
 accuracy, which made the first model over-predict coarse errors 1.1x to 3.2x, see
 docs/guide/tolerance.md); between the pilot steps the error is interpolated on a log-log scale, beyond
 them extended with the order of the nearest pair (at least 1). The step is the largest
-whose predicted error is ``SAFETY * E``, between ``MIN_STEP`` and ``MAX_STEP`` voxels; the
+whose predicted error is ``SAFETY * E``, between ``MIN_STEP`` and ``MAX_STEP`` voxels
+(``CROSSING_MAX_STEP`` for the walk by crossings); the
 pilot is then rendered at that step, its error measured and added to the model, and the
 step chosen again (``verified``), since the error between the pilot's octaves is not
 smooth in the step.
@@ -83,6 +84,15 @@ CHECK_ROUNDS = 3                         # check frames at shorter steps, at mos
 REFERENCE_SHARE = 0.25                   # a check's reference is refined until its error is within this share
 FINEST_REFERENCE = 1.0 / 32.0            # of the check's target, down to this step (voxels)
 OTHER_WAYS_BELOW = 0.125                 # voxels: weigh pre-integrated ways only under this plain step
+# the walk by crossings jumps empty cells whatever the step, and its error follows its
+# longest piece (step / refine): its step may reach further, still measured on the pilot
+CROSSING_MAX_STEP = 4.0
+GROW_ROUNDS = 2                          # pilot frames at longer steps for the walk by crossings, at most
+
+
+def max_step(sampling):
+    """The longest step (voxels) a tolerance request may take with ``sampling``."""
+    return CROSSING_MAX_STEP if sampling.get("refine_walk") == "crossings" else MAX_STEP
 
 
 @dataclass(frozen=True)
@@ -297,7 +307,9 @@ def verified(model, render, scene, tolerance, sampling=PLAIN):
     against the Richardson image and added to the model; a step over ``SAFETY * E`` is
     chosen again from the model so corrected (at most VERIFY_ROUNDS pilot frames). The
     step returned is one whose pilot error was measured within ``SAFETY * E`` where any
-    was; the answer is kept, so asking again costs nothing and gives the same step."""
+    was; the answer is kept, so asking again costs nothing and gives the same step. For
+    the walk by crossings a step so measured is lengthened while the model, with that
+    point, gives a longer one measured within too (GROW_ROUNDS pilot frames at most)."""
     tolerance = check_tolerance(tolerance)
     sampling = dict(PLAIN, **sampling)
     key = (tolerance, tuple(sorted(sampling.items())))
@@ -326,7 +338,21 @@ def verified(model, render, scene, tolerance, sampling=PLAIN):
             if choice.step_voxels < min(PILOT_STEPS):
                 break
         error = measured(choice.step_voxels)
-        within = [s for s, e in zip(model.steps, model.errors) if e <= target and MIN_STEP <= s <= MAX_STEP]
+        if sampling.get("refine_walk") == "crossings" and error is not None and error <= target:
+            # the walk's error grows slower past the pilot's steps than their order says (its
+            # pieces are cut at crossings): a longer step is taken only where measured within
+            for _ in range(GROW_ROUNDS):
+                longer = choose_step(model, scene, tolerance, sampling)
+                if longer.step_voxels <= choice.step_voxels * (1 + 1e-6):
+                    break
+                t0 = time.perf_counter()
+                pilot = model.pilot if model.pilot is not None else pilot_scene(scene)
+                grown = rmse(render(pilot, longer.step), model.reference)
+                model = model.with_point(longer.step_voxels, grown, time.perf_counter() - t0)
+                if grown > target:
+                    break
+                choice, error = longer, grown
+        within = [s for s, e in zip(model.steps, model.errors) if e <= target and MIN_STEP <= s <= max_step(sampling)]
         if (error is None or error > target) and within and choice.step_voxels >= min(PILOT_STEPS):
             k = max(within)
             choice = Choice(tolerance=tolerance, step=k * scene.volume.min_spacing, step_voxels=k,
@@ -341,11 +367,12 @@ def choose_step(model, scene, tolerance, sampling=PLAIN):
     """The Choice for RMSE ``tolerance`` under ``model`` (an ErrorModel of ``scene``,
     measured with the ray caster's ``sampling`` options)."""
     tolerance = check_tolerance(tolerance)
+    longest = max_step(sampling)
     if max(model.errors) == 0.0:
-        steps = MAX_STEP
+        steps = longest
     else:
         steps = model.largest_step(SAFETY * tolerance)
-    steps = min(max(steps, MIN_STEP), MAX_STEP)
+    steps = min(max(steps, MIN_STEP), longest)
     return Choice(tolerance=tolerance, step=steps * scene.volume.min_spacing, step_voxels=steps,
                   predicted_rmse=model.predict(steps), order=model.order, pilot_size=model.pilot_size,
                   pilot_seconds=model.pilot_seconds, **dict(PLAIN, **sampling))
