@@ -43,6 +43,16 @@ def egl_renderer():
     return _get_renderer("egl")
 
 
+@pytest.fixture(scope="session")
+def fetch_renderer():
+    """A renderer whose shaders interpolate volumes from texel fetches (as where the
+    texture unit's filter is not exact)."""
+    r = dvr_gl.Renderer()
+    r.programs.context_defines["TEXTURE_FILTER_EXACT"] = 0
+    yield r
+    r.release()
+
+
 @pytest.fixture
 def ctx(renderer):
     """The renderer's context, checked for GL errors before and after the test."""

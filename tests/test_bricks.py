@@ -35,16 +35,6 @@ CHEST = os.path.join(SHARED_DATA, "vtkjs_lidc2_ct", "LIDC2_256x256x133_uint8.raw
 SIZE = 48
 
 
-@pytest.fixture(scope="module")
-def fetch_renderer():
-    """A renderer whose shaders interpolate volumes from texel fetches (as where the
-    texture unit's filter is not exact)."""
-    r = dvr_gl.Renderer()
-    r.programs.context_defines["TEXTURE_FILTER_EXACT"] = 0
-    yield r
-    r.release()
-
-
 @functools.lru_cache(maxsize=None)
 def _volume(name, dtype=None):
     if name == "head":

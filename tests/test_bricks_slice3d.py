@@ -25,16 +25,6 @@ from dvr_gl.techniques import slice3d, slice3d_bricks
 from test_bricks import _scene, _volume
 
 
-@pytest.fixture(scope="module")
-def fetch_renderer():
-    """A renderer whose shaders interpolate volumes from texel fetches (as where the
-    texture unit's filter is not exact)."""
-    r = dvr_gl.Renderer()
-    r.programs.context_defines["TEXTURE_FILTER_EXACT"] = 0
-    yield r
-    r.release()
-
-
 def assert_within_filter_rounding(renderer, fetch_renderer, scene, brick, **options):
     single, single_fetched = renderer.render(scene, "slice3d", **options), fetch_renderer.render(scene, "slice3d", **options)
     bricked = renderer.render(scene, "slice3d", brick_size=brick, **options)

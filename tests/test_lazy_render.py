@@ -30,14 +30,6 @@ def cache_folder(tmp_path, monkeypatch):
     monkeypatch.setenv("DVR_GL_CACHE", str(tmp_path / "cache"))
 
 
-@pytest.fixture(scope="module")
-def fetch_renderer():
-    r = dvr_gl.Renderer()
-    r.programs.context_defines["TEXTURE_FILTER_EXACT"] = 0
-    yield r
-    r.release()
-
-
 def _store(tmp_path):
     """The CT head's samples as a zarr store (chunks of 32), opened lazily."""
     zarr = pytest.importorskip("zarr")
