@@ -25,7 +25,7 @@ def walk_tolerance(plan):
     to the longest piece) times the most pieces the reference reads on one ray (the last
     ``twin.render_plan`` call). GL and reference pass over the same cells (the same
     distance map) and make the same cubics from the same corners; float32 moves a
-    crossing found by Newton's method by a few ulps of the stretch, which changes the
+    crossing found by Halley's method by a few ulps of the stretch, which changes the
     piece's end values by the field's rounding already in that bound; a cubic that only
     grazes a knot within ``plan.crossings.tol`` may be cut in one and not the other, which
     changes that piece by the straight line's error over a stretch the cubic hardly leaves

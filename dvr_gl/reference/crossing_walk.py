@@ -12,7 +12,7 @@ from .common import blend_under, box_rays
 from .exact_geometry import surface_behind, surface_hits
 from .shading import RayLighting, sample_terms
 
-NEWTON = 3           # CW_NEWTON
+HALLEY = 2           # CW_HALLEY
 
 
 def cubic_at(c, u):
@@ -68,12 +68,16 @@ def next_turn(c, u):
 
 
 def crossing_of(c, u, s, u_end, s_end, target):
-    """Twin of ``crossingOf``: Newton's method from the chord's crossing."""
+    """Twin of ``crossingOf``: Halley's method from the chord's crossing."""
     x = u + (u_end - u) * np.clip((target - s) / np.where(s_end != s, s_end - s, 1.0), 0.0, 1.0)
-    for _ in range(NEWTON):
-        slope = c[:, 1] + x * (2.0 * c[:, 2] + x * 3.0 * c[:, 3])
-        step = np.where(slope != 0, (cubic_at(c, x) - target) / np.where(slope != 0, slope, 1.0), 0.0)
-        x = np.clip(x - step, u, u_end)
+    with np.errstate(invalid="ignore"):      # (an infinite target: a result the caller drops)
+        for _ in range(HALLEY):
+            f = cubic_at(c, x) - target
+            slope = c[:, 1] + x * (2.0 * c[:, 2] + x * 3.0 * c[:, 3])
+            curve = 2.0 * c[:, 2] + 6.0 * c[:, 3] * x
+            den = 2.0 * slope * slope - f * curve
+            step = np.where(den != 0, 2.0 * f * slope / np.where(den != 0, den, 1.0), 0.0)
+            x = np.clip(x - step, u, u_end)
     return np.minimum(np.maximum(x, u + 1e-5), u_end)
 
 

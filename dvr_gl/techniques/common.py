@@ -154,10 +154,11 @@ def preintegration_applies(scene):
             and not {"boundary", "silhouette"} & set(scene.illustration))
 
 
-def preintegration_table(scene, step, tables):
+def preintegration_table(scene, step, tables, size=None):
     """The scene's pre-integrated table for segments ``step`` long (built once per TF,
-    value range and step)."""
-    from ..model.preintegration import ZERO_LENGTH, build_table
+    value range, step and size; ``size`` nodes, by default ``preintegration.TABLE_SIZE``)."""
+    from ..model.preintegration import TABLE_SIZE, ZERO_LENGTH, build_table
+    size = TABLE_SIZE if size is None else size
     if scene.optical_model != "emission_absorption":
         raise ValueError(f"preintegrate tables emission-absorption segments; optical_model "
                          f"{scene.optical_model!r} is sampled at segment midpoints (preintegrate=False)")
@@ -170,10 +171,10 @@ def preintegration_table(scene, step, tables):
                          f"scales it per sample (preintegrate=False)")
     volume, tf = scene.volume, scene.tf
     # the zero-length colour does not depend on the length: one per TF for all steps
-    zero = tables.get("preintegration_zero", volume, tf, make=lambda v, t: build_table(
-        t, v.data_range, ZERO_LENGTH * v.min_spacing, zero=False))
-    return tables.get("preintegration", volume, tf, step,
-                      make=lambda v, t, length: build_table(t, v.data_range, length, zero=zero))
+    zero = tables.get(f"preintegration_zero:{size}", volume, tf, make=lambda v, t: build_table(
+        t, v.data_range, ZERO_LENGTH * v.min_spacing, size=size, zero=False))
+    return tables.get(f"preintegration:{size}", volume, tf, step,
+                      make=lambda v, t, length: build_table(t, v.data_range, length, size=size, zero=zero))
 
 
 def point_shading_defines(scene):
