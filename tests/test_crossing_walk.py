@@ -58,6 +58,23 @@ def test_crossing_walk_gl_matches_reference(renderer, case):
     assert metrics.max_abs_error(gl, ref) <= walk_tolerance(plan)
 
 
+def test_crossing_walk_moves_on_far_from_the_eye(renderer):
+    """Seen from far away (a 1-degree view: the eye about 100 volume radii out), a
+    hundred-thousandth of a cell is below float32's resolution of the ray's t, and a walk
+    nudged on by that alone stood still at a face until its round limit, dropping what
+    lay beyond (found on the chest CT's spike, 0.46 of opacity in some pixels): the nudge
+    is at least four float32 steps of t, as in the twin."""
+    volume, tf = ml_spike()
+    scene = dvr_gl.Scene(volume, tf, dvr_gl.default_camera(volume, azimuth=30, elevation=20, fov=1.0), 40, 32)
+    opts = dict(step=2.0 * volume.min_spacing, preintegrate=True, refine=2, refine_walk="crossings",
+                ert_transmittance=0.0)
+    plan = raycast.make_plan(scene, **opts)
+    gl = renderer.render(scene, **opts)
+    ref = reference.render(scene, technique="raycast", **opts)
+    assert ref[..., 3].max() > 0.5
+    assert metrics.max_abs_error(gl, ref) <= walk_tolerance(plan)
+
+
 def test_crossing_walk_error_shrinks_with_its_pieces(renderer):
     """Against the exact image of the Marschner-Lobb spike, at a 4-voxel step: the error
     falls as the longest piece (step / refine) goes from 1 to 1/4 to 1/16 voxel (4.6x and

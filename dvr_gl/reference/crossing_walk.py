@@ -13,6 +13,7 @@ from .exact_geometry import surface_behind, surface_hits
 from .shading import RayLighting, sample_terms
 
 HALLEY = 2           # CW_HALLEY
+ULPS = 4.8e-7        # CW_ULPS
 
 
 def cubic_at(c, u):
@@ -101,6 +102,11 @@ def _box_exit(o, d, spacing, lo, hi):
         return np.where(d != 0, (far - o) / d, np.inf).min(axis=1)
 
 
+def _beyond(t, nudge):
+    """Twin of ``beyond``: a hundred-thousandth of a cell past t, or four float32 steps of t."""
+    return t + np.maximum(nudge, np.abs(t) * ULPS)
+
+
 def _cell_ahead(o, d, t, spacing, dims):
     index = (o + t[:, None] * d) / spacing + 1e-4 * np.sign(d)
     return np.clip(np.floor(index).astype(np.int64), 0, dims - 2)
@@ -147,7 +153,7 @@ def render_plan(plan):
                 counts["skip"] += going.size
                 r = rows[going]
                 grow = (reach[going] - 1)[:, None]
-                t[r] = np.maximum(_box_exit(o[r], d[r], spacing, cell[going] - grow, cell[going] + grow), t[r] + nudge)
+                t[r] = np.maximum(_box_exit(o[r], d[r], spacing, cell[going] - grow, cell[going] + grow), _beyond(t[r], nudge))
                 cell[going] = _cell_ahead(o[r], d[r], t[r], spacing, dims)
                 reach[going] = cw.empty_reach[cell[going, 2], cell[going, 1], cell[going, 0]]
                 going = going[(reach[going] > 0) & (t[r] < t1[r])]
@@ -158,7 +164,7 @@ def render_plan(plan):
             t_out = _box_exit(o[rows], d[rows], spacing, cell, cell)
             ta = t[rows]
             tb = np.minimum(t_out, t1[rows])
-            t[rows] = np.where(tb > ta, tb, np.maximum(t_out, ta + nudge))
+            t[rows] = np.where(tb > ta, tb, np.maximum(t_out, _beyond(ta, nudge)))
             ok = tb > ta
             r, cell, ta, tb = rows[ok], cell[ok], ta[ok], tb[ok]
             counts["cell"] += r.size

@@ -18,6 +18,7 @@
 #define KNOT_COUNT 1
 #endif
 #define CW_HALLEY 2             // Halley steps to a crossing
+#define CW_ULPS 4.8e-7          // four float32 steps, relative (beyond)
 
 #ifndef CW_COEFFICIENT_ROW
 #define CW_COEFFICIENT_ROW 2048  // cells per row of t_cell_coefficients (crossing_walk.COEFFICIENT_ROW)
@@ -129,6 +130,13 @@ ivec3 cellAhead(vec3 origin_c, vec3 dir_c, float t) {
     return clamp(ivec3(floor(index)), ivec3(0), ivec3(u_dims) - 2);
 }
 
+// A little beyond t, so that the walk always moves on: a hundred-thousandth of a cell, or
+// four float32 steps of t where those are longer (far from the eye a hundred-thousandth
+// of a cell is below float32's resolution of t, and t + it == t: the walk stood still).
+float beyond(float t, float nudge) {
+    return t + max(nudge, abs(t) * CW_ULPS);
+}
+
 // Where the ray leaves the box of cells [lo, hi] (cell indices, inclusive).
 float boxExit(vec3 origin, vec3 inv_dir, vec3 dir, ivec3 lo, ivec3 hi) {
     vec3 far_face = mix(vec3(lo), vec3(hi + 1), greaterThan(dir, vec3(0.0))) * u_spacing;
@@ -172,7 +180,7 @@ void crossingWalk(vec3 origin, vec3 dir, float t0, float t1, inout vec3 color, i
             if (reach > 0) for (; reach > 0 && t < t1 && r < u_cw_rounds; ++r) {
                 // the box of cells within reach - 1 of this one is empty (at least a
                 // hundred-thousandth of a cell on: rounding at the box's faces)
-                t = max(boxExit(origin, inv_dir, dir, cell - (reach - 1), cell + (reach - 1)), t + nudge);
+                t = max(boxExit(origin, inv_dir, dir, cell - (reach - 1), cell + (reach - 1)), beyond(t, nudge));
                 cell = cellAhead(origin_c, dir_c, t);
                 reach = int(texelFetch(t_walk_map, cell, 0).r);
             }
@@ -180,7 +188,7 @@ void crossingWalk(vec3 origin, vec3 dir, float t0, float t1, inout vec3 color, i
             float t_out = boxExit(origin, inv_dir, dir, cell, cell);
             t_a = t;
             float t_b = min(t_out, t1);
-            t = t_b > t_a ? t_b : max(t_out, t + nudge);
+            t = t_b > t_a ? t_b : max(t_out, beyond(t, nudge));
             span = t_b - t_a;
             if (span <= 0.0) continue;
             cubic = cellCubic(max(-reach, 0), origin_c + t_a * dir_c - vec3(cell),
