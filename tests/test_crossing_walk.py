@@ -24,7 +24,7 @@ def walk_tolerance(plan):
     """The pre-integrated bound per lookup (test_slicing, for the fine table and pieces up
     to the longest piece) times the most pieces the reference reads on one ray (the last
     ``twin.render_plan`` call). GL and reference pass over the same cells (the same
-    distance map) and make the same cubics from the same corners; float32 moves a
+    empty cubes) and make the same cubics from the same corners; float32 moves a
     crossing found by Halley's method by a few ulps of the stretch, which changes the
     piece's end values by the field's rounding already in that bound; a cubic that only
     grazes a knot within ``plan.crossings.tol`` may be cut in one and not the other, which
@@ -95,15 +95,18 @@ def test_crossing_walk_error_shrinks_with_its_pieces(renderer):
 
 def test_passing_over_empty_cells_changes_no_pixel(renderer, monkeypatch):
     """A cell passed over has no value within a table cell of its corners' range with
-    opacity: walked, its pieces would read exactly zero from the table. With a distance
-    map of zeros (every cell walked) the image is the same bit for bit."""
+    opacity: walked, its pieces would read exactly zero from the table. With every cell
+    counted as one that may show something (no empty cube: every cell walked) the image
+    is the same bit for bit."""
     scene = ml_scene()
     opts = dict(step=4.0 * scene.volume.min_spacing, preintegrate=True, refine=2, refine_walk="crossings")
     plan = raycast.make_plan(scene, **opts)
-    assert 0.5 < (plan.crossings.empty_reach > 0).mean() < 1.0      # most cells are passed over
+    assert 0.5 < (plan.crossings.empty_cubes[0] > 0).mean() < 1.0      # most cells are passed over
     skipped = renderer.render(scene, **opts)
-    monkeypatch.setattr(crossing_walk, "empty_reach",
-                        lambda volume, tf, table, occupancy: np.zeros(tuple(n - 1 for n in volume.shape), np.float32))
+    # every cell walked: each one counted as one that may show something
+    walk_cells = crossing_walk.walk_cells
+    monkeypatch.setattr(crossing_walk, "walk_cells", lambda volume, tf, table, occupancy: walk_cells(
+        volume, tf, table, lambda ranges, tf, table: np.ones(ranges[0].shape)))
     walked_all = dvr_gl.Renderer()
     try:
         every = walked_all.render(scene, **opts)
@@ -113,20 +116,47 @@ def test_passing_over_empty_cells_changes_no_pixel(renderer, monkeypatch):
     np.testing.assert_array_equal(skipped, every)
 
 
-def test_empty_reach_is_the_chebyshev_distance_to_a_visible_cell():
-    volume = dvr_gl.Volume(np.zeros((6, 7, 8), np.float32))
+def test_empty_cubes_are_the_largest_towards_each_octant():
+    """One visible block of cells among empty ones: each cell's cube towards an octant is
+    the largest of the codes' sides that keeps clear of it, where its centre lies in the
+    volume (cells beyond count as clear), or at least the side of the Chebyshev distance
+    (the cube within the empty one centred on the cell): against a brute-force search.
+    The walk map packs the eight codes, and numbers the visible cells."""
+    volume = dvr_gl.Volume(np.zeros((12, 13, 14), np.float32))
     values = volume.values(np.float32).copy()
-    values[2, 3, 4] = 100.0                  # the eight cells around this sample see it
+    values[3, 4, 5] = 100.0                  # the eight cells around this sample see it
     volume = dvr_gl.Volume(values)
     tf = dvr_gl.TransferFunction(color=[(0, 1, 1, 1), (100, 1, 1, 1)], opacity=[(0, 0.0), (50, 0.0), (100, 1.0)])
     plan = raycast.make_plan(dvr_gl.Scene(volume, tf, dvr_gl.default_camera(volume), 8, 8), preintegrate=True,
                              refine=2, refine_walk="crossings")
-    reach = plan.crossings.empty_reach
-    assert reach.shape == (5, 6, 7)
-    z, y, x = np.indices(reach.shape)
-    expected = np.maximum.reduce([np.maximum(np.maximum(1 - z, z - 2), 0), np.maximum(np.maximum(2 - y, y - 3), 0),
-                                  np.maximum(np.maximum(3 - x, x - 4), 0)])
-    np.testing.assert_array_equal(reach, expected)
+    cw = plan.crossings
+    assert cw.empty_cubes.shape == (8, 11, 12, 13)
+    shows = np.zeros((11, 12, 13), bool)
+    shows[2:4, 3:5, 4:6] = True
+    sides = [int(crossing_walk.cube_reach(c)) + 1 for c in range(1, 16)]
+    assert sides == [1, 3, 5, 7, 9, 13, 17, 25, 33, 49, 65, 97, 129, 193, 257]
+    size = np.array(shows.shape)
+    grid = np.stack(np.indices(shows.shape), axis=-1)
+    seen = grid[shows]
+    for octant in range(8):
+        step = np.array([-1 if octant & 4 else 1, -1 if octant & 2 else 1, -1 if octant & 1 else 1])  # z, y, x
+        for cell in np.ndindex(shows.shape):
+            here = np.array(cell)
+            distance = np.abs(seen - here).max(axis=1).min()     # Chebyshev, to the nearest visible cell
+
+            def clear(k):
+                ends = here + step * (k - 1)
+                lo, hi = np.maximum(np.minimum(here, ends), 0), np.minimum(np.maximum(here, ends), size - 1)
+                centre = here + step * (k // 2)
+                inside = ((centre >= 0) & (centre < size)).all()
+                return k <= distance or (inside and not shows[lo[0]:hi[0] + 1, lo[1]:hi[1] + 1, lo[2]:hi[2] + 1].any())
+            expected = max((c for c, k in enumerate(sides, start=1) if clear(k)), default=0)
+            assert cw.empty_cubes[(octant,) + cell] == expected, (octant, cell)
+    # next to the visible block: away from it a cube 13 cells a side, towards it one cell
+    assert (cw.empty_cubes[0, 4, 4, 4], cw.empty_cubes[7, 4, 4, 4]) == (6, 1)
+    word = cw.walk_map[0, 0, 0]
+    assert [(int(word) >> (4 * o)) & 15 for o in range(8)] == list(cw.empty_cubes[:, 0, 0, 0])
+    assert cw.walk_map[shows].tolist() == [n << 4 for n in range(8)]
 
 
 def test_knots_and_support():
@@ -162,21 +192,21 @@ def test_tolerance_weighs_the_crossing_walk_where_opacity_is_narrow(renderer):
 
 
 def test_stored_coefficients_give_the_trilinear_field():
-    """The walk map numbers the cells that may show something in order (-n in the n-th);
+    """The walk map numbers the cells that may show something in order (n << 4 in the n-th);
     the coefficient texture holds each one's trilinear field: checked against the
     trilinear interpolation of its eight corners at random points in it."""
     scene = ml_scene()
     plan = raycast.make_plan(scene, step=4.0 * scene.volume.min_spacing, preintegrate=True, refine=2,
                              refine_walk="crossings")
     cw = plan.crossings
-    visible = np.flatnonzero(cw.empty_reach.ravel() == 0)
-    np.testing.assert_array_equal(-cw.walk_map.ravel()[visible], np.arange(visible.size))
-    np.testing.assert_array_equal(cw.walk_map[cw.empty_reach > 0], cw.empty_reach[cw.empty_reach > 0])
+    visible = np.flatnonzero(cw.empty_cubes[0].ravel() == 0)
+    np.testing.assert_array_equal(cw.walk_map.ravel()[visible] >> 4, np.arange(visible.size))
+    assert (cw.walk_map.ravel()[visible] & 15 == 0).all() and (cw.walk_map[cw.empty_cubes[0] > 0] & 15 > 0).all()
     rng = np.random.default_rng(3)
     pick = rng.choice(visible.size, 50, replace=False)
     row, col = pick // crossing_walk.COEFFICIENT_ROW, 2 * (pick % crossing_walk.COEFFICIENT_ROW)
     c = np.concatenate([cw.coefficients[row, col], cw.coefficients[row, col + 1]], axis=1).astype(np.float64)
-    k, j, i = np.unravel_index(visible[pick], cw.empty_reach.shape)
+    k, j, i = np.unravel_index(visible[pick], cw.empty_cubes.shape[1:])
     x, y, z = rng.random((3, pick.size))
     v = scene.volume.values(np.float64)
     corners = {(a, b, e): v[k + e, j + b, i + a] for a in (0, 1) for b in (0, 1) for e in (0, 1)}

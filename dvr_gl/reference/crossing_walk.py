@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..techniques.crossing_walk import cube_reach
 from .common import blend_under, box_rays
 from .exact_geometry import surface_behind, surface_hits
 from .shading import RayLighting, sample_terms
@@ -130,6 +131,9 @@ def render_plan(plan):
     dims = np.array(volume.shape[::-1])
     lo_s, hi_s, tol = cw.support[0], cw.support[1], cw.tol
     nudge = 1e-5 * spacing.min()
+    falls = (d < 0).astype(np.int64)                       # the rays' octants (walk_cells)
+    octant = falls[:, 0] + 2 * falls[:, 1] + 4 * falls[:, 2]
+    cubes = cw.empty_cubes
     m = hit.size
     acc = np.zeros((m, 4))
     alive = np.ones(m, bool)
@@ -147,16 +151,17 @@ def render_plan(plan):
         cubic, t_a, span = np.zeros((m, 4)), np.zeros(m), np.zeros(m)
         while rows.size:
             cell = _cell_ahead(o[rows], d[rows], t[rows], spacing, dims)
-            reach = cw.empty_reach[cell[:, 2], cell[:, 1], cell[:, 0]].astype(np.int64)
-            going = np.flatnonzero((reach > 0) & (t[rows] < t1[rows]))
-            while going.size:        # boxes of empty cells
+            code = cubes[octant[rows], cell[:, 2], cell[:, 1], cell[:, 0]].astype(np.int64)
+            going = np.flatnonzero((code > 0) & (t[rows] < t1[rows]))
+            while going.size:        # cubes of empty cells, from the cell towards the ray's octant
                 counts["skip"] += going.size
                 r = rows[going]
-                grow = (reach[going] - 1)[:, None]
-                t[r] = np.maximum(_box_exit(o[r], d[r], spacing, cell[going] - grow, cell[going] + grow), _beyond(t[r], nudge))
+                grow = cube_reach(code[going])[:, None]
+                lo, hi = cell[going] - grow * falls[r], cell[going] + grow * (1 - falls[r])
+                t[r] = np.maximum(_box_exit(o[r], d[r], spacing, lo, hi), _beyond(t[r], nudge))
                 cell[going] = _cell_ahead(o[r], d[r], t[r], spacing, dims)
-                reach[going] = cw.empty_reach[cell[going, 2], cell[going, 1], cell[going, 0]]
-                going = going[(reach[going] > 0) & (t[r] < t1[r])]
+                code[going] = cubes[octant[r], cell[going, 2], cell[going, 1], cell[going, 0]]
+                going = going[(code[going] > 0) & (t[r] < t1[r])]
             keep = t[rows] < t1[rows]
             rows, cell = rows[keep], cell[keep]
             if rows.size == 0:

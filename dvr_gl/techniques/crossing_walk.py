@@ -5,9 +5,9 @@
 Pre-integration takes the field as linear between a segment's ends; along a ray the
 trilinear field is a cubic in each cell, and a narrow opacity band is crossed where that
 cubic passes through the band's values. This walk goes from cell to cell: cells whose
-corner values reach no value with opacity are passed over many at a time (a Chebyshev
-distance map over the cells: a ray leaves the whole empty box around its cell in one
-round); in the others the cubic is made from the cell's trilinear coefficients (stored
+corner values reach no value with opacity are passed over many at a time (per cell and
+octant of ray directions the largest empty cube with a corner at the cell lying that
+way: a ray leaves the whole cube in one round); in the others the cubic is made from the cell's trilinear coefficients (stored
 for those cells only, two texture reads) and the cell's stretch
 of ray is cut where it turns and where it crosses a knot of the TF, every piece at most
 ``step / refine`` long (the parameter the error shrinks with), each read from the
@@ -38,11 +38,11 @@ class CrossingPlan:
     """What the walk adds to a RaycastPlan (``raycast.RaycastPlan.crossings``)."""
     knots: np.ndarray          # float64 values where the TF bends near opacity
     support: tuple             # (lo, hi): values outside have zero opacity
-    empty_reach: np.ndarray    # (cz, cy, cx) float32 per cell: distance in cells to a visible one
+    empty_cubes: np.ndarray    # (8, cz, cy, cx) uint8: per octant and cell the empty cube's code
     part: float                # the longest piece, world units
     rounds: int                # a bound on one ray's rounds
     tol: float                 # values this close to a knot count as on it (float32 rounding)
-    walk_map: np.ndarray = None       # float32 per cell: the distance, or -n in visible cell n
+    walk_map: np.ndarray = None       # uint32 per cell: the octants' codes, or n << 4 in visible cell n
     coefficients: np.ndarray = None   # (rows, 2 COEFFICIENT_ROW, 4) float32 (walk_cells)
 
 
@@ -99,7 +99,7 @@ def cell_ranges(volume):
 
 
 COEFFICIENT_ROW = 2048   # cells per row of the coefficient texture (two texels each)
-MAX_VISIBLE_CELLS = 1 << 24   # cell indices stay exact in the float32 walk map
+MAX_VISIBLE_CELLS = 1 << 24   # cells that may show something (numbered in the walk map's upper 28 bits)
 
 
 def cell_coefficients(volume, cells):
@@ -118,42 +118,80 @@ def cell_coefficients(volume, cells):
                      v111 - v110 - v101 - v011 + v100 + v010 + v001 - v000], axis=1).astype(np.float32)
 
 
+def cube_reach(code):
+    """How far in cells an empty cube reaches from its corner cell, from its 4-bit code 1
+    .. 15: sides 1, 3, 5, 7, 9, 13, 17, 25, 33, 49, 65, 97, 129, 193, 257, odd (so that
+    each has a centre cell) and about 1.4x apart (cubeReach in the shader)."""
+    code = np.asarray(code, np.int64)
+    return np.where(code <= 5, 2 * code - 2, (12 + 4 * (code & 1)) << (np.maximum(code - 6, 0) // 2))
+
+
+def empty_cubes(visible):
+    """Per octant of ray directions and cell, (8, cz, cy, cx) uint8: the code (cube_reach)
+    of the largest cube of cells with no visible cell that has a corner at the cell and
+    lies towards the octant (bit 0: x falls along the ray, bit 1: y, bit 2: z); 0 in a
+    visible cell. A ray of that octant leaves the cube through its far faces only, so
+    one round takes it out of the whole cube: about twice as far as out of a cube
+    centred on the cell. From the Chebyshev distance D to the nearest visible cell: the
+    cube of side 2r + 1 is centred at the cell r steps towards the octant, and empty where
+    D there exceeds r; at least the cube of side D (inside the centred cube of radius D -
+    1) wherever its centre would lie beyond the volume."""
+    from scipy.ndimage import distance_transform_cdt
+    visible = np.asarray(visible, bool)
+    shape = visible.shape
+    if not visible.any():
+        distance = np.full(shape, 2 * max(shape) + 1, np.int64)
+    else:
+        distance = distance_transform_cdt(~visible, metric="chessboard").astype(np.int64)
+    sides = cube_reach(np.arange(1, 16)) + 1
+    base = np.searchsorted(sides, distance, side="right").astype(np.uint8)   # sides <= D
+    codes = np.repeat(base[None], 8, axis=0)
+    for code, side in enumerate(sides, start=1):
+        r = int(side - 1) // 2
+        if r == 0:
+            continue
+        empty = distance > r                    # the cube of radius r about each cell
+        if any(r >= n for n in shape) or not empty.any():
+            break
+        found = empty.astype(np.uint8) * np.uint8(code)
+        for octant in range(8):
+            falls = (octant & 4, octant & 2, octant & 1)      # z, y, x
+            centre = tuple(slice(0, n - r) if f else slice(r, n) for f, n in zip(falls, shape))
+            corner = tuple(slice(r, n) if f else slice(0, n - r) for f, n in zip(falls, shape))
+            np.maximum(codes[octant][corner], found[centre], out=codes[octant][corner])
+    return codes
+
+
 def walk_cells(volume, tf, table, occupancy):
-    """(empty_reach's distances, the walk map, the coefficient texture). The walk map is
-    the distance where it is positive and -n in the n-th cell that may show something;
-    the coefficient texture (rows of COEFFICIENT_ROW cells, RGBA32F) holds those cells'
-    coefficients, cell n at texels 2 (n % COEFFICIENT_ROW) and the one after, row
-    n // COEFFICIENT_ROW: 32 bytes per visible cell only (every cell's would be 8x a
-    float32 volume)."""
-    reach = empty_reach(volume, tf, table, occupancy)
-    visible = np.flatnonzero(reach.ravel() <= 0)
+    """(the cubes' codes (empty_cubes), the walk map, the coefficient texture). A cell
+    may show something where a value within one table cell of its corners' range has
+    opacity (``occupancy``: the ray caster's ``preint_occupancy``, passed in by it). The
+    walk map is uint32 per cell: in an empty cell the eight octants' codes, four bits
+    each (octant o in bits 4o to 4o + 3, none of them 0); in the n-th cell that may show
+    something n << 4 (its low four bits 0). The coefficient texture (rows of
+    COEFFICIENT_ROW cells, RGBA32F) holds those cells' coefficients, cell n at texels
+    2 (n % COEFFICIENT_ROW) and the one after, row n // COEFFICIENT_ROW: 32 bytes per
+    such cell only (every cell's would be 8x a float32 volume)."""
+    shows = occupancy(cell_ranges(volume), tf, table) > 0
+    codes = empty_cubes(shows)
+    visible = np.flatnonzero(shows.ravel())
     if visible.size > MAX_VISIBLE_CELLS:
         raise ValueError(f"refine_walk='crossings' takes at most {MAX_VISIBLE_CELLS} cells whose values may "
                          f"have opacity, got {visible.size}")
-    walk_map = reach.copy()
-    walk_map.ravel()[visible] = -np.arange(visible.size, dtype=np.float32)
+    walk_map = np.zeros(shows.shape, np.uint32)
+    for octant in range(8):
+        walk_map |= codes[octant].astype(np.uint32) << np.uint32(4 * octant)
+    walk_map.ravel()[visible] = np.arange(visible.size, dtype=np.uint32) << np.uint32(4)
     rows = max(-(-visible.size // COEFFICIENT_ROW), 1)
     texels = np.zeros((rows * COEFFICIENT_ROW, 8), np.float32)
-    texels[:visible.size] = cell_coefficients(volume, np.stack(np.unravel_index(visible, reach.shape), axis=1))
-    return reach, walk_map, texels.reshape(rows, 2 * COEFFICIENT_ROW, 4)
-
-
-def empty_reach(volume, tf, table, occupancy):
-    """Per cell, float32: the Chebyshev distance in cells to the nearest cell that may
-    show something (0: this one may), a cell showing nothing when no value within one
-    table cell of its corners' range has opacity (``occupancy``: the ray caster's
-    ``preint_occupancy``, passed in by it)."""
-    from scipy.ndimage import distance_transform_cdt
-    visible = occupancy(cell_ranges(volume), tf, table) > 0
-    if not visible.any():
-        return np.full(visible.shape, float(max(visible.shape) + 1), np.float32)
-    return distance_transform_cdt(~visible, metric="chessboard").astype(np.float32)
+    texels[:visible.size] = cell_coefficients(volume, np.stack(np.unravel_index(visible, shows.shape), axis=1))
+    return codes, walk_map, texels.reshape(rows, 2 * COEFFICIENT_ROW, 4)
 
 
 def plan_walk(scene, step, refine, preint_fine, tables, defines, refine_walk, occupancy):
     """Set the defines of a refined plan's walk (REACH_WALK; CROSSING_WALK and its
     KNOT_COUNT) and return the walk by crossings' part of the plan (None for the other
-    walks); a named error where it does not apply. ``occupancy``: see ``empty_reach``."""
+    walks); a named error where it does not apply. ``occupancy``: see ``walk_cells``."""
     defines["REACH_WALK"] = int(refine_walk == "reach")
     if refine_walk != "crossings":
         return None
@@ -163,7 +201,7 @@ def plan_walk(scene, step, refine, preint_fine, tables, defines, refine_walk, oc
     if min(volume.shape) < 2:
         raise ValueError(f"refine_walk='crossings' needs two samples along every axis, got shape {volume.shape}")
     knots = tables.get("crossing_knots", scene.tf, make=knot_values)
-    reach, walk_map, coefficients = tables.get(
+    cubes, walk_map, coefficients = tables.get(
         "crossing_walk_cells", volume, scene.tf, preint_fine,
         make=lambda v, tf, table: walk_cells(v, tf, table, occupancy))
     part = step / refine
@@ -172,7 +210,7 @@ def plan_walk(scene, step, refine, preint_fine, tables, defines, refine_walk, oc
     per_cell = 3 * (len(knots) + 2) + int(np.ceil(diagonal / part)) + 2
     defines.update(CROSSING_WALK=1, KNOT_COUNT=max(len(knots), 1), CW_COEFFICIENT_ROW=COEFFICIENT_ROW)
     scale = max(np.abs(knots).max(initial=0.0), *np.abs(np.nan_to_num(volume.data_range)))
-    return CrossingPlan(knots=knots, support=support(scene.tf), empty_reach=reach, part=part,
+    return CrossingPlan(knots=knots, support=support(scene.tf), empty_cubes=cubes, part=part,
                         rounds=min(cells * (per_cell + 1), 1 << 24), tol=float(2.0 ** -20 * scale),
                         walk_map=walk_map, coefficients=coefficients)
 
@@ -193,7 +231,7 @@ def add_inputs(renderer, plan, textures, uniforms):
         return tex
     textures["t_walk_map"] = renderer.resources.for_objects(
         "crossing_walk_map", crossings.walk_map,
-        make=lambda: texture3d(renderer.ctx, crossings.walk_map, 1, "f4", linear=False))
+        make=lambda: texture3d(renderer.ctx, crossings.walk_map, 1, "u4", linear=False))
     textures["t_cell_coefficients"] = renderer.resources.for_objects(
         "crossing_cell_coefficients", crossings.coefficients,
         make=lambda: texture2d(renderer.ctx, crossings.coefficients))

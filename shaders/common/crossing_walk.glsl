@@ -1,10 +1,10 @@
 // The walk by crossings (raycast.frag, CROSSING_WALK with PREINTEGRATE; NumPy twin:
 // reference.crossing_walk). The ray goes from cell to cell of the trilinear field. A cell
 // whose corner values reach no value with opacity (a bound: the trilinear field stays
-// within its corners' range) is passed over together with every cell around it that is
-// just as empty: t_walk_map holds, per cell, the Chebyshev distance in cells to the
-// nearest cell that may show anything, so the ray leaves that whole box in one round. In
-// a cell that may show something the field along the ray is one cubic, made from the
+// within its corners' range) is passed over together with every cell ahead of it that
+// is just as empty: t_walk_map holds, per cell and octant of ray directions, the largest
+// empty cube with a corner at the cell lying towards that octant, so the ray leaves
+// that whole cube in one round. In a cell that may show something the field along the ray is one cubic, made from the
 // trilinear coefficients stored for that cell (two reads, not eight corners); its stretch
 // of ray is cut where the cubic turns (so each piece is monotone) and where it crosses a
 // knot of the TF (so the TF is one line over each piece), each piece at most u_cw_part
@@ -23,9 +23,10 @@
 #ifndef CW_COEFFICIENT_ROW
 #define CW_COEFFICIENT_ROW 2048  // cells per row of t_cell_coefficients (crossing_walk.COEFFICIENT_ROW)
 #endif
-uniform sampler3D t_walk_map;      // R32F per cell: > 0, the Chebyshev distance (cells) to the
-                                   // nearest cell whose corners' range may have opacity; else
-                                   // -n in the n-th such cell (crossing_walk.walk_cells)
+uniform usampler3D t_walk_map;     // R32UI per cell: in an empty cell its eight octants' cube
+                                   // codes, four bits each (cubeReach; octant o in bits 4o ..),
+                                   // none 0; n << 4 in the n-th cell whose corners' range may
+                                   // have opacity (crossing_walk.walk_cells)
 uniform sampler2D t_cell_coefficients;   // RGBA32F, two texels per such cell: its trilinear
                                          // field's coefficients (crossing_walk.cell_coefficients)
 uniform float u_knots[KNOT_COUNT]; // the TF's knots where opacity or the colour it weighs bends
@@ -137,6 +138,12 @@ float beyond(float t, float nudge) {
     return t + max(nudge, abs(t) * CW_ULPS);
 }
 
+// How far (cells) an empty cube reaches from the cell, from its code 1 .. 15
+// (crossing_walk.cube_reach): sides 1, 3, 5, 7, 9, 13, 17, 25, 33, ..., 257.
+int cubeReach(int code) {
+    return code <= 5 ? 2 * code - 2 : (12 + 4 * (code & 1)) << ((code - 6) >> 1);
+}
+
 // Where the ray leaves the box of cells [lo, hi] (cell indices, inclusive).
 float boxExit(vec3 origin, vec3 inv_dir, vec3 dir, ivec3 lo, ivec3 hi) {
     vec3 far_face = mix(vec3(lo), vec3(hi + 1), greaterThan(dir, vec3(0.0))) * u_spacing;
@@ -165,6 +172,9 @@ void crossingWalk(vec3 origin, vec3 dir, float t0, float t1, inout vec3 color, i
     float t = t0;                 // the next cell's entry
     int r = 0;
     float nudge = 1e-5 * min(u_spacing.x, min(u_spacing.y, u_spacing.z));
+    // the ray's octant: its cubes' codes, and the axes along which they lie below the cell
+    ivec3 falls = ivec3(lessThan(dir, vec3(0.0)));
+    uint octant_bits = uint(4 * (falls.x + 2 * falls.y + 4 * falls.z));
     for (; t < t1 && r < u_cw_rounds; ++r) {
         // find the next cell whose cubic reaches the support
         bool shows = false;
@@ -174,15 +184,16 @@ void crossingWalk(vec3 origin, vec3 dir, float t0, float t1, inout vec3 color, i
         float e1 = 0.0, e2 = 0.0, e_end = 0.0;   // its values there and at the end
         for (; !shows && t < t1 && r < u_cw_rounds; ++r) {
             ivec3 cell = cellAhead(origin_c, dir_c, t);
-            int reach = int(texelFetch(t_walk_map, cell, 0).r);
+            uint word = texelFetch(t_walk_map, cell, 0).r;
             // (a loop behind an if: llvmpipe runs a loop's body once even where no pixel of
             // the group enters it, but passes over an if none of them takes)
-            if (reach > 0) for (; reach > 0 && t < t1 && r < u_cw_rounds; ++r) {
-                // the box of cells within reach - 1 of this one is empty (at least a
-                // hundred-thousandth of a cell on: rounding at the box's faces)
-                t = max(boxExit(origin, inv_dir, dir, cell - (reach - 1), cell + (reach - 1)), beyond(t, nudge));
+            if ((word & 15u) != 0u) for (; (word & 15u) != 0u && t < t1 && r < u_cw_rounds; ++r) {
+                // the cube of cells from this one towards the ray's octant is empty (at
+                // least a hundred-thousandth of a cell on: rounding at the cube's faces)
+                int reach = cubeReach(int((word >> octant_bits) & 15u));
+                t = max(boxExit(origin, inv_dir, dir, cell - reach * falls, cell + reach * (1 - falls)), beyond(t, nudge));
                 cell = cellAhead(origin_c, dir_c, t);
-                reach = int(texelFetch(t_walk_map, cell, 0).r);
+                word = texelFetch(t_walk_map, cell, 0).r;
             }
             if (t >= t1) break;
             float t_out = boxExit(origin, inv_dir, dir, cell, cell);
@@ -191,7 +202,7 @@ void crossingWalk(vec3 origin, vec3 dir, float t0, float t1, inout vec3 color, i
             t = t_b > t_a ? t_b : max(t_out, beyond(t, nudge));
             span = t_b - t_a;
             if (span <= 0.0) continue;
-            cubic = cellCubic(max(-reach, 0), origin_c + t_a * dir_c - vec3(cell),
+            cubic = cellCubic((word & 15u) == 0u ? int(word >> 4u) : 0, origin_c + t_a * dir_c - vec3(cell),
                               origin_c + t_b * dir_c - vec3(cell));
             // the cubic lies within the range of its Bernstein coefficients on [0, 1]
             vec4 bern = vec4(cubic.x, cubic.x + cubic.y / 3.0, cubic.x + (2.0 * cubic.y + cubic.z) / 3.0,
