@@ -7,11 +7,11 @@ trilinear field is a cubic in each cell, and a narrow opacity band is crossed wh
 cubic passes through the band's values. This walk goes from cell to cell: cells whose
 corner values reach no value with opacity are passed over many at a time (per cell and
 octant of ray directions the largest empty cube with a corner at the cell lying that
-way: a ray leaves the whole cube in one round); in the others the cubic is made from the cell's trilinear coefficients (stored
-for those cells only, two texture reads) and the cell's stretch
-of ray is cut where it turns and where it crosses a knot of the TF, every piece at most
-``step / refine`` long (the parameter the error shrinks with), each read from the
-pre-integrated table of that length with the cubic's values at its ends. The TF is one
+way: a ray leaves the whole cube in one round); in the others the cubic is made from
+the cell's trilinear coefficients (stored for those cells only, two texture reads) and
+the cell's stretch of ray is cut where it turns and where it crosses a knot of the TF,
+every piece at most ``step / refine`` long (the parameter the error shrinks with), each
+read from the pre-integrated table of that length with the cubic's values at its ends. The TF is one
 line over each piece and the field monotone along it, so the only error left is the
 cubic's distance from its chord over the piece, second order in the piece's length.
 """
@@ -38,12 +38,19 @@ class CrossingPlan:
     """What the walk adds to a RaycastPlan (``raycast.RaycastPlan.crossings``)."""
     knots: np.ndarray          # float64 values where the TF bends near opacity
     support: tuple             # (lo, hi): values outside have zero opacity
-    empty_cubes: np.ndarray    # (8, cz, cy, cx) uint8: per octant and cell the empty cube's code
     part: float                # the longest piece, world units
     rounds: int                # a bound on one ray's rounds
     tol: float                 # values this close to a knot count as on it (float32 rounding)
     walk_map: np.ndarray = None       # uint32 per cell: the octants' codes, or n << 4 in visible cell n
     coefficients: np.ndarray = None   # (rows, 2 COEFFICIENT_ROW, 4) float32 (walk_cells)
+
+    @property
+    def empty_cubes(self):
+        """(8, cz, cy, cx) uint8: per octant and cell the empty cube's code (empty_cubes),
+        read back from the walk map (0 in a cell that may show something)."""
+        empty = (self.walk_map & 15) != 0
+        return np.stack([np.where(empty, (self.walk_map >> np.uint32(4 * octant)) & 15, 0).astype(np.uint8)
+                         for octant in range(8)])
 
 
 def knot_values(tf):
@@ -99,7 +106,7 @@ def cell_ranges(volume):
 
 
 COEFFICIENT_ROW = 2048   # cells per row of the coefficient texture (two texels each)
-MAX_VISIBLE_CELLS = 1 << 24   # cells that may show something (numbered in the walk map's upper 28 bits)
+MAX_VISIBLE_CELLS = 1 << 24   # cells that may show something: 8192 rows of the coefficient texture
 
 
 def cell_coefficients(volume, cells):
@@ -163,11 +170,11 @@ def empty_cubes(visible):
 
 
 def walk_cells(volume, tf, table, occupancy):
-    """(the cubes' codes (empty_cubes), the walk map, the coefficient texture). A cell
+    """(the walk map, the coefficient texture). A cell
     may show something where a value within one table cell of its corners' range has
     opacity (``occupancy``: the ray caster's ``preint_occupancy``, passed in by it). The
     walk map is uint32 per cell: in an empty cell the eight octants' codes, four bits
-    each (octant o in bits 4o to 4o + 3, none of them 0); in the n-th cell that may show
+    each (octant o in bits 4o to 4o + 3, none of them 0: empty_cubes); in the n-th cell that may show
     something n << 4 (its low four bits 0). The coefficient texture (rows of
     COEFFICIENT_ROW cells, RGBA32F) holds those cells' coefficients, cell n at texels
     2 (n % COEFFICIENT_ROW) and the one after, row n // COEFFICIENT_ROW: 32 bytes per
@@ -185,7 +192,7 @@ def walk_cells(volume, tf, table, occupancy):
     rows = max(-(-visible.size // COEFFICIENT_ROW), 1)
     texels = np.zeros((rows * COEFFICIENT_ROW, 8), np.float32)
     texels[:visible.size] = cell_coefficients(volume, np.stack(np.unravel_index(visible, shows.shape), axis=1))
-    return codes, walk_map, texels.reshape(rows, 2 * COEFFICIENT_ROW, 4)
+    return walk_map, texels.reshape(rows, 2 * COEFFICIENT_ROW, 4)
 
 
 def plan_walk(scene, step, refine, preint_fine, tables, defines, refine_walk, occupancy):
@@ -201,7 +208,7 @@ def plan_walk(scene, step, refine, preint_fine, tables, defines, refine_walk, oc
     if min(volume.shape) < 2:
         raise ValueError(f"refine_walk='crossings' needs two samples along every axis, got shape {volume.shape}")
     knots = tables.get("crossing_knots", scene.tf, make=knot_values)
-    cubes, walk_map, coefficients = tables.get(
+    walk_map, coefficients = tables.get(
         "crossing_walk_cells", volume, scene.tf, preint_fine,
         make=lambda v, tf, table: walk_cells(v, tf, table, occupancy))
     part = step / refine
@@ -210,7 +217,7 @@ def plan_walk(scene, step, refine, preint_fine, tables, defines, refine_walk, oc
     per_cell = 3 * (len(knots) + 2) + int(np.ceil(diagonal / part)) + 2
     defines.update(CROSSING_WALK=1, KNOT_COUNT=max(len(knots), 1), CW_COEFFICIENT_ROW=COEFFICIENT_ROW)
     scale = max(np.abs(knots).max(initial=0.0), *np.abs(np.nan_to_num(volume.data_range)))
-    return CrossingPlan(knots=knots, support=support(scene.tf), empty_cubes=cubes, part=part,
+    return CrossingPlan(knots=knots, support=support(scene.tf), part=part,
                         rounds=min(cells * (per_cell + 1), 1 << 24), tol=float(2.0 ** -20 * scale),
                         walk_map=walk_map, coefficients=coefficients)
 

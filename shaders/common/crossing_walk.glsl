@@ -158,7 +158,7 @@ bool inSupport(float s) {
 
 // Composite the ray's [t0, t1] front to back into (color, alpha_acc). A round of the
 // outer loop takes one cell whose corners may show something: a loop of its own first
-// passes over the boxes of empty cells in front of it; the cell's cubic is made; and
+// passes over the cubes of empty cells in front of it; the cell's cubic is made; and
 // a third loop reads the cell's pieces with opacity, each round passing first over the
 // stretch outside the support in front of its piece (from turning point or cell entry
 // to the crossing into the support). llvmpipe runs a loop's body for a group of pixels
