@@ -367,7 +367,7 @@ def test_program_cache_sets_the_filter_switch_from_the_probe(renderer):
     # every program that declares TEXTURE_FILTER_EXACT gets the probe's answer (those
     # that do not, the other techniques' throughout the suite, build without it)
     exact = linear_filter_is_exact(renderer.ctx)
-    assert renderer.programs.context_defines == {"TEXTURE_FILTER_EXACT": int(exact)}
+    assert renderer.programs.context_defines["TEXTURE_FILTER_EXACT"] == int(exact)
     volume = dvr_gl.Volume(np.linspace(0.0, 1.0, 6 ** 3, dtype=np.float32).reshape(6, 6, 6))
     scene = dvr_gl.Scene(volume, RAMP, dvr_gl.default_camera(volume, azimuth=30, elevation=20), 12, 12)
     renderer.render(scene, preintegrate=True)

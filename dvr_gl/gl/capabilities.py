@@ -15,8 +15,9 @@ def context_defines(ctx) -> dict:
     """The shader switches that follow from ``ctx``: ``TEXTURE_FILTER_EXACT``
     (common/sampling.glsl, common/preintegration.glsl), 1 where the texture unit's linear
     filter is exact; else volumes, gradients, stacks and pre-integration tables are
-    interpolated in the shader from texel fetches."""
-    return {"TEXTURE_FILTER_EXACT": int(linear_filter_is_exact(ctx))}
+    interpolated in the shader from texel fetches. ``LOCKSTEP_LANES`` (tetra/walk.frag),
+    1 where code under a branch that no pixel takes costs as if taken (``lockstep_lanes``)."""
+    return {"TEXTURE_FILTER_EXACT": int(linear_filter_is_exact(ctx)), "LOCKSTEP_LANES": int(lockstep_lanes(ctx))}
 
 
 def linear_filter_is_exact(ctx, tolerance=1e-5):
@@ -47,6 +48,75 @@ def max_3d_texture_size(ctx) -> int:
     with current(ctx):
         size = ctx.info.get("GL_MAX_3D_TEXTURE_SIZE")
     return int(size) if size else 256
+
+
+# a loop whose rounds hold costly code under a branch: taken by every pixel or by none
+_BRANCH_PROBE = """#version 330 core
+uniform int u_rounds;
+uniform float u_threshold;
+out vec4 f_color;
+void main() {
+    vec4 a = vec4(gl_FragCoord.xy * 1e-3, 0.5, 0.25);
+    for (int i = 0; i < u_rounds; ++i) {
+        a = a * 0.999 + 1e-3;
+        if (a.x < u_threshold)
+            for (int k = 0; k < 4; ++k) a = sin(a * 1.1 + 0.3) + exp(-a * a) + log(abs(a) + 1.0);
+    }
+    f_color = a;
+}
+"""
+_LOCKSTEP = {}     # the GL's vendor, renderer and version -> lockstep_lanes
+
+
+def lockstep_lanes(ctx, side=64, min_seconds=2e-3) -> bool:
+    """Whether code under a branch that no pixel takes costs ``ctx`` about as much as when
+    every pixel takes it: true of llvmpipe, whose lanes (8 pixels a SIMD vector) follow
+    execution masks through every branch and loop body with no jump over one that none
+    takes; GPUs jump over it. Timed on a loop of costly rounds (lengthened until the
+    taken pass takes ``min_seconds``): the untaken pass costing half the taken one or
+    more says lockstep (llvmpipe: about 1; a GPU: a few hundredths). Asked once per GL
+    implementation (vendor, renderer, version)."""
+    with current(ctx):      # (moderngl keeps the first answer: ask with the context current)
+        info = ctx.info
+    key = (info.get("GL_VENDOR"), info.get("GL_RENDERER"), info.get("GL_VERSION"))
+    if key in _LOCKSTEP:
+        return _LOCKSTEP[key]
+    with current(ctx):
+        target = ctx.texture((side, side), 4, dtype="f4")
+        fbo = ctx.framebuffer(color_attachments=[target])
+        prog = ctx.program(
+            vertex_shader="#version 330 core\nvoid main() { vec2 p = vec2(gl_VertexID == 1 ? 3.0 : -1.0, "
+                          "gl_VertexID == 2 ? 3.0 : -1.0); gl_Position = vec4(p, 0.0, 1.0); }",
+            fragment_shader=_BRANCH_PROBE)
+        vao = ctx.vertex_array(prog, [])
+        try:
+            def seconds(threshold):
+                prog["u_threshold"].value = threshold
+                fbo.use()
+                vao.render(vertices=3)
+                ctx.finish()
+                times = []
+                for _ in range(3):
+                    start = time.perf_counter()
+                    vao.render(vertices=3)
+                    ctx.finish()
+                    times.append(time.perf_counter() - start)
+                return min(times)
+
+            rounds = 16
+            while True:
+                prog["u_rounds"].value = rounds
+                taken = seconds(1e30)
+                if taken >= min_seconds or rounds >= 1 << 20:
+                    break
+                rounds *= 4
+            untaken = seconds(-1e30)
+        finally:
+            idle_framebuffer(ctx).use()     # (never leave a released framebuffer bound: context.idle_framebuffer)
+            for obj in (vao, prog, fbo, target):
+                obj.release()
+    _LOCKSTEP[key] = bool(untaken >= 0.5 * taken)
+    return _LOCKSTEP[key]
 
 
 # the bare loop both stages run: a column of trilinear reads per pixel

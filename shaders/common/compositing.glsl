@@ -11,8 +11,7 @@
 
 // For x in [-0.5, 0.5]: log(1 + x) = 2 atanh(z), z = x / (2 + x), |z| <= 1/3; eight odd
 // terms leave a relative error below (1/3)^16 / 17 ~ 1e-9.
-float log1pAccurate(float x) {
-    if (abs(x) > 0.5) return log(1.0 + x);
+float log1pSeries(float x) {
     float z = x / (2.0 + x);
     float z2 = z * z;
     float p = 1.0 / 15.0 + z2 * (1.0 / 17.0);
@@ -26,9 +25,13 @@ float log1pAccurate(float x) {
     return 2.0 * z * p;
 }
 
+float log1pAccurate(float x) {
+    if (abs(x) > 0.5) return log(1.0 + x);
+    return log1pSeries(x);
+}
+
 // For |x| <= 0.5: Taylor series to x^10 / 10!, relative error below 0.5^10 / 11! ~ 2.5e-11.
-float expm1Accurate(float x) {
-    if (abs(x) > 0.5) return exp(x) - 1.0;
+float expm1Series(float x) {
     float p = 1.0 / 3628800.0;
     p = 1.0 / 362880.0 + x * p;
     p = 1.0 / 40320.0 + x * p;
@@ -40,6 +43,11 @@ float expm1Accurate(float x) {
     p = 0.5 + x * p;
     p = 1.0 + x * p;
     return x * p;
+}
+
+float expm1Accurate(float x) {
+    if (abs(x) > 0.5) return exp(x) - 1.0;
+    return expm1Series(x);
 }
 
 // Opacity of a segment length_over_unit unit distances long: 1 - (1 - alpha)^(L/u),

@@ -48,26 +48,43 @@ const float GL_W[17] = float[17](0.5, 0.5,
 
 float knotValue(int k) { return u_knot_color[k].r; }
 
-// Colour, alpha and transparency at s on the line of interval j (constant beyond the ends).
-void knotLine(int j, float s, out vec3 c, out float a, out float w) {
+// Colour, alpha and transparency at a and at b on the line of interval j (constant beyond
+// the ends), its knots read once.
+void knotLines(int j, float a, float b, out vec3 ca, out float aa, out float wa, out vec3 cb, out float ab,
+               out float wb) {
     int jj = clamp(j, 0, u_knot_count - 2);
     vec4 r0 = u_knot_color[jj];
     vec4 r1 = u_knot_color[jj + 1];
     vec4 q0 = u_knot_opacity[jj];
     vec4 q1 = u_knot_opacity[jj + 1];
-    float f = j < 0 ? 0.0 : (j >= u_knot_count - 1 ? 1.0 : clamp((s - r0.r) / (r1.r - r0.r), 0.0, 1.0));
-    c = mix(r0.gba, r1.gba, f);
-    a = mix(q0.r, q1.r, f);
-    w = mix(q0.g, q1.g, f);
+    float fa = j < 0 ? 0.0 : (j >= u_knot_count - 1 ? 1.0 : clamp((a - r0.r) / (r1.r - r0.r), 0.0, 1.0));
+    float fb = j < 0 ? 0.0 : (j >= u_knot_count - 1 ? 1.0 : clamp((b - r0.r) / (r1.r - r0.r), 0.0, 1.0));
+    ca = mix(r0.gba, r1.gba, fa);
+    aa = mix(q0.r, q1.r, fa);
+    wa = mix(q0.g, q1.g, fa);
+    cb = mix(r0.gba, r1.gba, fb);
+    ab = mix(q0.r, q1.r, fb);
+    wb = mix(q0.g, q1.g, fb);
 }
 
-// H(x): the mean of ln(1 + x g) over g in [0, 1], x >= -1 (series below |x| = 0.1).
+// Colour, alpha and transparency at s on the line of interval j (constant beyond the ends).
+void knotLine(int j, float s, out vec3 c, out float a, out float w) {
+    vec3 c_unused;
+    float a_unused, w_unused;
+    knotLines(j, s, s, c, a, w, c_unused, a_unused, w_unused);
+}
+
+// H(x) by the first `terms` terms of its series (x^k / (k (k + 1)), alternating): 8 for
+// |x| < 0.1, 12 for |x| <= 0.3 leave under 1e-9 (a constant count: the loop unrolls).
+float meanLog1pSeries(float x, int terms) {
+    float acc = 0.0;
+    for (int k = terms; k >= 1; k--) acc = x * (1.0 / float(k * (k + 1)) - acc);
+    return acc;
+}
+
+// H(x): the mean of ln(1 + x g) over g in [0, 1], x >= -1 (the series below |x| = 0.1).
 float meanLog1p(float x) {
-    if (abs(x) < 0.1) {
-        float acc = 0.0;
-        for (int k = 8; k >= 1; k--) acc = x * (1.0 / float(k * (k + 1)) - acc);
-        return acc;
-    }
+    if (abs(x) < 0.1) return meanLog1pSeries(x, 8);
     if (x <= -1.0) return -1.0;
     return (1.0 + x) * log(1.0 + x) / x - 1.0;
 }
@@ -141,8 +158,7 @@ vec4 linearSegmentCued(float s_front, float s_back, float len, float q_front, fl
         float l = ds > 0.0 ? len * (abs(b - a) / ds) : len;
         vec3 ca, cb;
         float aa, wa, ab, wb;
-        knotLine(j, a, ca, aa, wa);
-        knotLine(j, b, cb, ab, wb);
+        knotLines(j, a, b, ca, aa, wa, cb, ab, wb);
         // the factor at the piece's ends (linear along the segment, as the field is)
         float qa = ds > 0.0 ? mix(q_front, q_back, abs(a - s_front) / ds) : q_front;
         float qb = ds > 0.0 ? mix(q_front, q_back, abs(b - s_front) / ds) : q_back;
@@ -238,6 +254,59 @@ vec4 linearSegmentCued(float s_front, float s_back, float len, float q_front, fl
 #if OPTICAL_MODEL == 1
     color = vec3(0.0);      // absorption only
 #endif
+    return vec4(color, alpha_acc);
+}
+
+// The common segment, light: each of its pieces (cut at the knots) of optical depth and
+// relative change of transparency at most 0.3, and none reaching opacity 1. Integrated as
+// linearSegment does, but each piece by 4 Gauss-Legendre points (linearSegment takes 2 to
+// 4 there, by the rule of node_count, which keeps the rule's error below ~5e-8) in
+// straight-line code: no parts, no choice of rule, no series-or-function branches, which
+// lanes shaded in lockstep (llvmpipe) pay for whether any takes them or not. light =
+// false: not such a segment (use linearSegment; the value returned is not used).
+vec4 lightSegment(float s_front, float s_back, float len, out bool light) {
+    bool up = s_back >= s_front;
+#if KNOT_CAPACITY <= 8
+    int below = 0;                          // knotsBelow(s_front, !up), the knots unrolled
+    for (int k = 0; k < KNOT_CAPACITY; ++k) {
+        float v = knotValue(k);
+        below += k < u_knot_count && (up ? v <= s_front : v < s_front) ? 1 : 0;
+    }
+    int j = below - 1;
+#else
+    int j = knotsBelow(s_front, !up) - 1;
+#endif
+    float ds = abs(s_back - s_front);
+    vec3 color = vec3(0.0);
+    float alpha_acc = 0.0;
+    float a = s_front;
+    light = len > 0.0;
+    for (int piece = 0; piece <= u_knot_count; piece++) {     // as linearSegment's pieces
+        float b = up ? (j + 1 <= u_knot_count - 1 ? min(knotValue(j + 1), s_back) : s_back)
+                     : (j >= 0 ? max(knotValue(j), s_back) : s_back);
+        float l = ds > 0.0 ? len * (abs(b - a) / ds) : len;
+        vec3 ca, cb;
+        float aa, wa, ab, wb;
+        knotLines(j, a, b, ca, aa, wa, cb, ab, wb);
+        float lu = l * u_inv_unit;
+        float nlw = aa <= 0.5 ? -log1pSeries(-aa) : -log(wa);
+        float r = (wb - wa) / wa;
+        float od = lu * (nlw - meanLog1pSeries(r, 12));
+        bool adds = l > 0.0 && (aa > 0.0 || ab > 0.0);
+        light = light && (!adds || (wb > 0.0 && od <= 0.3 && abs(r) <= 0.3));
+        float mean = 0.0;                   // the mean of T(f) - T(1) over the piece
+        for (int i = 5; i < 9; ++i) {       // (unrolled: a constant count)
+            float od_to = lu * GL_X[i] * (nlw - meanLog1pSeries(r * GL_X[i], 12));
+            mean += GL_W[i] * exp(-od_to) * -expm1Series(-max(od - od_to, 0.0));
+        }
+        float A = adds ? -expm1Series(-od) : 0.0;
+        float weight = 1.0 - alpha_acc;
+        color += adds ? weight * (ca * A + (cb - ca) * mean) : vec3(0.0);
+        alpha_acc += weight * A;
+        a = b;
+        if ((up && a >= s_back) || (!up && a <= s_back)) break;
+        j += up ? 1 : -1;
+    }
     return vec4(color, alpha_acc);
 }
 

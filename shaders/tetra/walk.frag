@@ -14,6 +14,9 @@
 // opacity reaches ERT_ALPHA, or at a guard against cycles (MAX_STALLED, u_max_steps).
 #version 330 core
 #include "common/precise.glsl"
+#ifdef GL_ARB_shader_group_vote
+#extension GL_ARB_shader_group_vote : enable    // anyInvocationARB (WALK_LIGHT)
+#endif
 
 #ifndef ORTHO
 #define ORTHO 0
@@ -49,6 +52,16 @@
 #ifndef WALK_FOLDS
 #define WALK_FOLDS 1     // folded faces (foldedNext)
 #endif
+#ifndef LOCKSTEP_LANES
+#define LOCKSTEP_LANES 0 // the context's: pixels shaded in lockstep pay for branches none takes
+#endif
+#ifndef OPTICAL_MODEL
+#define OPTICAL_MODEL 0
+#endif
+// Light segments first (lightSegment), the others in the outer loop: with lanes in lockstep
+// every segment would otherwise pay for linearSegment's loops and branches
+#define WALK_LIGHT (LOCKSTEP_LANES && MODE_COMPOSITE && !SAMPLE_TERMS && !SEGMENT_TABLE && OPTICAL_MODEL == 0)
+#define WALK_OUTER (WALK_FLAT || WALK_FOLDS || WALK_LIGHT)
 
 #include "common/camera_ray.glsl"
 #include "common/linear_segment.glsl"
@@ -138,6 +151,8 @@ const int MAX_STALLED = 512;
 const uint SHOWN = 1u;
 const uint FLAT = 2u;
 const uint FOLDS = 60u;      // 4 << k: local face k is shared with a folded cell
+const int RARE_FLAT = 1;
+const int RARE_FOLD = 2;
 
 // A cell with folded faces (a neighbour on the same side of their shared face, as some
 // curvilinear grids have) that offers the ray no way on: the ray may go on in a folded
@@ -232,14 +247,25 @@ void PIXEL_MAIN() {
     vec3 offset = vec3(0.0);
 #endif
     // The walk steps through cells in an inner loop until it has a segment to add (or the
-    // ray ends or leaves), and adds it in the outer loop: neighbouring pixels then add
+    // ray ends or leaves), and adds it in the middle loop: neighbouring pixels then add
     // their segments together (the integral is the costly part, and pixels that run in
     // lockstep would otherwise each wait through the others' integrals at every step).
+    // The rare steps (into a zero-volume cell, out by a folded face) and, with lanes in
+    // lockstep, the segments that are not light are taken in the outer loop, which a group
+    // of pixels enters again only when one of them needs it: llvmpipe runs the code of an
+    // if for every pixel, taken or not, so in the inner loops that code would cost every
+    // step (the rare steps' alone a quarter of the blunt fin's frame).
     bool done = false;      // the ray has ended (kept interval, opacity); else it left the mesh
     bool left = false;
     int steps = 0;
     int prev = -1;          // the cell the walk came from (-1: entered from the boundary or the eye)
     int stalled = 0;        // steps in a row that took the ray no further
+#if WALK_OUTER
+    int rare = 0;           // RARE_FLAT: at zero-volume `cell`; RARE_FOLD: `cell` left by a folded face
+    bool pending = false;   // a segment that is not light, to add in the outer loop
+    vec3 pending_segment;   // its (s_front, s_back, length)
+    while (true) {          // the outer loop (its body is not indented)
+#endif
     while (!done && !left && steps < u_max_steps && stalled < MAX_STALLED) {
         bool found = false;
         int seg_cell = -1;
@@ -250,11 +276,10 @@ void PIXEL_MAIN() {
             ivec4 nb = texelFetch(t_neighbours, texelRow(cell), 0);
             int next;
 #if WALK_FLAT
-            if ((flags & FLAT) != 0u) {    // no segment; out through the face holding the crossing
-                int face = flatExit(cell, origin + t_cur * dir, dir, nb, prev);
-                next = face < 0 ? -1 : nb[face];
-                ++stalled;
-            } else
+            if ((flags & FLAT) != 0u) {    // no segment: the outer loop passes it
+                rare = RARE_FLAT;
+                break;
+            }
 #endif
             {
                 mat3x4 normals;
@@ -298,7 +323,7 @@ void PIXEL_MAIN() {
                     t_cur = max(t_cur, t_end);
                     next = t_out < 1.0e38 ? nb[face] : -1;     // none: no leaving plane but the way back
 #if WALK_FOLDS
-                    if (next < 0 && (flags & FOLDS) != 0u) next = foldedNext(flags, nb, prev, origin, dir, t_cur);
+                    if (next < 0 && (flags & FOLDS) != 0u) rare = RARE_FOLD;   // the outer loop finds the way on
 #endif
                 }
                 if (t_cur >= kept.y) {
@@ -306,6 +331,9 @@ void PIXEL_MAIN() {
                     break;
                 }
             }
+#if WALK_FOLDS
+            if (rare != 0) break;
+#endif
             if (next < 0) {                        // left the mesh: a re-entry is the next layer's
                 left = true;
                 break;
@@ -346,6 +374,14 @@ void PIXEL_MAIN() {
   #else
     #if SEGMENT_TABLE
         vec4 seg = tableSegment(s_front, s_back, b - a);
+    #elif WALK_LIGHT
+        bool light;
+        vec4 seg = lightSegment(s_front, s_back, b - a, light);
+        if (!light) {
+            pending = true;
+            pending_segment = vec3(s_front, s_back, b - a);
+            seg = vec4(0.0);
+        }
     #else
         vec4 seg = linearSegment(s_front, s_back, b - a);
     #endif
@@ -356,7 +392,52 @@ void PIXEL_MAIN() {
         acc += (1.0 - acc.a) * seg;              // front to back: the segment under what is in front
         if (acc.a >= ERT_ALPHA) done = true;
 #endif
+#if WALK_FOLDS
+        if (rare != 0) break;
+#endif
+#if WALK_LIGHT
+  #ifdef GL_ARB_shader_group_vote
+        if (anyInvocationARB(pending)) break;   // the whole group to the outer loop
+  #else
+        if (pending) break;
+  #endif
+#endif
     }
+#if WALK_OUTER
+#if WALK_LIGHT
+    if (pending) {
+        vec4 seg = linearSegment(pending_segment.x, pending_segment.y, pending_segment.z);
+        acc += (1.0 - acc.a) * seg;
+        if (acc.a >= ERT_ALPHA) done = true;
+        pending = false;
+    }
+#endif
+#if WALK_FLAT || WALK_FOLDS
+    if (rare != 0 && !done) {
+        int next = -1;
+        ivec4 nb = texelFetch(t_neighbours, texelRow(cell), 0);
+  #if WALK_FLAT
+        if (rare == RARE_FLAT) {                 // out through the face holding the crossing
+            int face = flatExit(cell, origin + t_cur * dir, dir, nb, prev);
+            next = face < 0 ? -1 : nb[face];
+            ++stalled;
+        }
+  #endif
+  #if WALK_FOLDS
+        if (rare == RARE_FOLD) next = foldedNext(texelFetch(t_flags, texelRow(cell), 0).r, nb, prev, origin, dir, t_cur);
+  #endif
+        if (next < 0) {
+            left = true;
+        } else {
+            prev = cell;
+            cell = next;
+        }
+    }
+    rare = 0;
+#endif
+    if (done || left || steps >= u_max_steps || stalled >= MAX_STALLED) break;
+    }
+#endif
     frag_acc = acc;
     float walked = state.z + float(steps);       // cells visited so far (diagnostics)
     if (done) {
