@@ -25,7 +25,7 @@ import dvr_gl
 from dvr_gl import Camera, Scene, TetMesh, TransferFunction, metrics, reference
 from dvr_gl.data import delaunay_ball, synthetic_tf
 from dvr_gl.model import mesh as M
-from dvr_gl.techniques import tetra, tetra_walk
+from dvr_gl.techniques import tetra, tetra_walk, walk_entries
 from dvr_gl.gl.context import current
 
 from test_tetra import CUBE, FIVE, GL_TOL, SIX, TF, VIEWS, blocks_mesh, closed_form_boxes, cube_mesh, _lattice_mesh
@@ -416,3 +416,27 @@ def test_tiles_give_the_same_pixels():
             img = whole.render(s, technique="tetra", sort="walk")
             assert img[..., 3].max() > 0.5
             assert np.array_equal(tiled.render(s, technique="tetra", sort="walk"), img)
+
+
+def test_first_layer_entries_by_the_depth_test(renderer, monkeypatch):
+    """The first layer's entries found in one draw by the depth test (the nearest t; among
+    equal t the first drawn, the faces being in the order of their cells) and in two by
+    MIN blending (the nearest t, then the smallest cell there) give the same images: a
+    non-convex ball seen whole, rays through the lattice's edges and vertices, the blunt
+    fin's boundary."""
+    cells = [(x, y, z) for x in range(3) for y in range(3) for z in range(3)]
+    lattice = Scene(blocks_mesh(cells), TF, Camera((7.5, 7.5, 7.5), (1.5, 1.5, 1.5), up=(0, 0, 1), ortho_height=6.0),
+                    33, 33)
+    scenes = [_ball(size=48), lattice, lattice.replace(camera=Camera((6.0, 5.0, 4.0), (1.5, 1.5, 1.5), fov=40))]
+    faces = tetra_walk.boundary_faces(delaunay_ball()).reshape(-1, 3)["slot"][:, 0]
+    assert (np.diff(faces) > 0).all()             # in the order of their cells
+    for scene in scenes:
+        one, plan = walk(renderer, scene)
+        steps_one = tetra_walk.walk_counts(renderer, plan)[0]
+        monkeypatch.setattr(walk_entries, "FIRST_LAYER_PICK", False)
+        two, plan = walk(renderer, scene)
+        monkeypatch.setattr(walk_entries, "FIRST_LAYER_PICK", True)
+        assert one[..., 3].max() > 0.3
+        assert np.array_equal(one, two)
+        # the same entry cells: the same cells visited, pixel by pixel
+        assert np.array_equal(steps_one, tetra_walk.walk_counts(renderer, plan)[0])

@@ -11,9 +11,9 @@ triangles (``WalkTextures``) and per-cell flags (shown, zero volume, folded face
 
 Per view, the CPU uploads a camera; then, per layer of depth peeling:
 
-1. entry pass (``walk_entry.vert/.geom/.frag``): the boundary faces are drawn twice,
-   each as its grown bounding box in window coordinates (so coverage is the fragment's
-   test, not rasterisation's: a face seen edge-on keeps its pixels), each fragment
+1. entry pass (``walk_entries``, ``walk_entry.vert/.geom/.frag``): the boundary faces are
+   drawn twice, each as its grown bounding box in window coordinates (so coverage is the
+   fragment's test, not rasterisation's: a face seen edge-on keeps its pixels), each fragment
    finding where its pixel's ray crosses the face's plane going in, inside the face's
    triangle; the first draw keeps the nearest such t beyond where the pixel's last walk
    stopped (MIN blending, exact), the second the smallest cell at exactly that t. Between
@@ -22,7 +22,11 @@ Per view, the CPU uploads a camera; then, per layer of depth peeling:
    if none, peeling stops there, without the second draw. The layers the last frame drew
    are drawn without reading their queries (reading one waits for the GPU), so a frame
    like the last waits once. Both draws test the marks before shading (early), so later
-   layers shade only the few pixels that still walk.
+   layers shade only the few pixels that still walk. The first layer, where no pixel is
+   marked yet, takes one draw (``walk_entries.FIRST_LAYER_PICK``, walk_entry.frag's
+   DEPTH_PICK): the depth test keeps the nearest t (window depth t times a power of two)
+   and, among equal depths, the first face drawn, the faces being in the order of their
+   cells.
 2. walk pass (``walk.frag``, a full-screen triangle tested against the marks: the pixels
    with an entry in the last layer (the first: in this one); llvmpipe skips the blocks
    of pixels without one): from its entry, each pixel's ray goes from cell to cell
@@ -33,9 +37,13 @@ Per view, the CPU uploads a camera; then, per layer of depth peeling:
    boundary face ends the layer for that pixel; a non-convex domain's re-entry is the
    next layer's entry. A pixel is done at the end of its kept interval or at opacity
    1 - 2^-20 (composite). The code for zero-volume cells and folded faces is compiled in
-   only for meshes that have them (``rare_paths``): llvmpipe runs both sides of a
-   per-pixel branch, so that code cost every step (15-25 % of the frame on the NASA
-   meshes). ``segments="table"``: the approximate integral of ``model.segment_table``.
+   only for meshes that have them (``rare_paths``), and runs in an outer loop that a
+   group of pixels enters only when one of them needs it: llvmpipe runs every branch's
+   code for the whole group, taken or not (``capabilities.lockstep_lanes``), so in the
+   stepping loop that code cost every step (15-25 % of the frame on the NASA meshes).
+   Where lanes run in lockstep, the light segments are integrated inline by a
+   straight-line rule and the others in that outer loop. ``segments="table"``: the
+   approximate integral of ``model.segment_table``.
 3. resolve: the accumulation into the image's target (composite, with the surface
    behind it) or classified (mip, minip, average: ``tetra_classify.frag``).
 
@@ -69,23 +77,13 @@ from .common import (bind, camera_uniforms, clip_uniforms, data_projection, grow
                      sample_term_uniforms)
 from .geometry import draw_surface_behind, surface_pass
 from .gpu import empty_vao, pixel_stage
+from . import walk_entries
+from .walk_entries import (MARK_GAP, StartFaces, WalkTargets, depth_scale, entries, first_entries, layer_depth,
+                           start_faces)
 
 MAX_PASSES = 64            # layers of depth peeling (entries along one ray) at most
 HIDDEN_FRACTION = 0.5      # walk only the cells the TF shows where it hides this share (walked_cells)
 MAX_CELLS = 1 << 24        # cell numbers travel as float32 (MIN blending): exact below 2^24
-NO_ENTRY = 3.0e38
-MARK_LEVELS = 128          # the layers' window depths (layer_depth) are 1/MARK_LEVELS apart
-MARK_GAP = 0.5 / MARK_LEVELS   # a test depth halfway to the last layer's: rounding-proof
-
-
-def layer_depth(layer):
-    """The window depth of the pixels that have an entry in ``layer``: falling by layer, so
-    that ``depth <= layer_depth(L - 1)`` (the depth test) keeps the pixels marked in layer
-    L - 1 or later: after the first layer, a pixel pass walks only those (they are fewer
-    each layer, as a pixel without an entry has none in any later layer)."""
-    return 1.0 - (layer + 1) / MARK_LEVELS
-
-
 class WalkUnsupported(ValueError):
     """A scene the cell walk does not render yet (the message says what to use)."""
 
@@ -249,42 +247,6 @@ class WalkTextures:
         self.faces.release()
 
 
-class WalkTargets:
-    """Per image size: two (accumulation, state) RGBA32F framebuffers used in turn, and
-    the entry pass's two R32F targets (nearest t, its cell)."""
-
-    def __init__(self, ctx, width, height):
-        def tex(components):
-            t = ctx.texture((width, height), components, dtype="f4")
-            t.filter = (ctx.NEAREST, ctx.NEAREST)
-            return t
-        self.acc = [tex(4), tex(4)]
-        self.state = [tex(4), tex(4)]
-        # the layers' marks (layer_depth): written by the entry pass, tested by the next pixel pass
-        self.marks = ctx.depth_renderbuffer((width, height))
-        self.layers = [ctx.framebuffer([self.acc[i], self.state[i]], self.marks) for i in range(2)]
-        for fbo in self.layers:
-            fbo.depth_mask = False
-        self.acc_only = [ctx.framebuffer([t]) for t in self.acc]
-        self.state_only = [ctx.framebuffer([t]) for t in self.state]
-        self.entry_t, self.entry_cell = tex(1), tex(1)
-        self.entry_t_fbo = ctx.framebuffer([self.entry_t])
-        self.entry_marked_fbo = ctx.framebuffer([self.entry_t], self.marks)
-        self.entry_cell_marked_fbo = ctx.framebuffer([self.entry_cell], self.marks)
-        self.marks_fbo = ctx.framebuffer([], self.marks)
-        for fbo in (self.entry_marked_fbo, self.entry_cell_marked_fbo):
-            fbo.depth_mask = False
-        self.entry_cell_fbo = ctx.framebuffer([self.entry_cell])
-
-    def release(self):
-        for fbo in (*self.layers, *self.acc_only, *self.state_only, self.entry_t_fbo, self.entry_marked_fbo,
-                    self.entry_cell_fbo, self.entry_cell_marked_fbo, self.marks_fbo):
-            fbo.release()
-        self.marks.release()
-        for t in (*self.acc, *self.state, self.entry_t, self.entry_cell):
-            t.release()
-
-
 def draw(renderer, plan, data, texture):
     """Render a ``sort="walk"`` plan into the renderer's target; returns that framebuffer.
     ``data``: tetra's per-mesh textures (``tetra.MeshTextures``: planes, field, points,
@@ -327,6 +289,10 @@ def draw(renderer, plan, data, texture):
     compute = pixel_stage(renderer, plan.stage) == "compute"
     entry_prog = renderer.programs.get("tetra/walk_entry.vert", "tetra/walk_entry.frag",
                                        dict(view, MARKED=0) if compute else view, geometry="tetra/walk_entry.geom")
+    # the first layer's entries in one draw (DEPTH_PICK), where its depth test is free: the
+    # fragment stage, no start faces, the eye outside the mesh
+    pick_prog = None if compute or not walk_entries.FIRST_LAYER_PICK else renderer.programs.get("tetra/walk_entry.vert", "tetra/walk_entry.frag",
+                                                           dict(view, DEPTH_PICK=1), geometry="tetra/walk_entry.geom")
     mark_prog = renderer.programs.get("tetra/walk_layer.vert", "tetra/walk_mark.frag")
     walk_defines = {**plan.defines, **renderer.tables.get("tetra_walk_rare_paths", mesh, make=rare_paths)}
     walk_prog = (renderer.programs.compute("tetra/walk.frag", walk_defines) if compute else
@@ -334,9 +300,10 @@ def draw(renderer, plan, data, texture):
     view_proj = data_projection(scene, near=None if scene.camera.is_ortho else
                                 1e-6 * float(np.linalg.norm(mesh.extent))).astype("f4").tobytes()
     cam = camera_uniforms(scene)
-    bind(entry_prog, {}, {**cam, "u_target_size": scene.target_size, "u_inflate": grow_pixels(ctx),
-                          "u_start_margin": 1e-6 * float(np.linalg.norm(mesh.extent))})
-    entry_prog["u_view_proj"].write(view_proj)
+    for prog in (entry_prog, pick_prog) if pick_prog is not None else (entry_prog,):
+        bind(prog, {}, {**cam, "u_target_size": scene.target_size, "u_inflate": grow_pixels(ctx),
+                        "u_start_margin": 1e-6 * float(np.linalg.norm(mesh.extent))})
+        prog["u_view_proj"].write(view_proj)
     walk_uniforms = {**cam, "u_knot_count": plan.knots.count, "u_inv_unit": plan.knots.inv_unit,
                      "u_max_steps": max_steps(mesh), **clip_uniforms(scene)}
     if scene.shading or scene.illustration:
@@ -351,7 +318,7 @@ def draw(renderer, plan, data, texture):
     starts = start_faces(mesh, scene.camera, walked)
     start_vao = None
     if starts is not None:
-        start_vao = (renderer.resources.for_objects("tetra_walk_start", make=lambda: _StartFaces(ctx), capacity=1).vao(
+        start_vao = (renderer.resources.for_objects("tetra_walk_start", make=lambda: StartFaces(ctx), capacity=1).vao(
             entry_prog, starts), len(starts))
     query = renderer.resources.get("tetra_walk_query", "samples", lambda: ctx.query(samples=True), capacity=None)
 
@@ -374,8 +341,13 @@ def draw(renderer, plan, data, texture):
         if not first_from_eye:
             starting = layer == 0 and start_vao is not None
             count = "pixels" if layer == MAX_PASSES else layer >= counted_from
-            if _entries(ctx, entry_prog, faces, walk, data, flags, targets, src, query,
-                        start_vao if starting else None, count, layer, marker) == 0 and count:
+            if layer == 0 and pick_prog is not None and start_vao is None:
+                found = first_entries(ctx, pick_prog, walk, data, flags, targets, src, query, count, marker,
+                                       depth_scale(scene))
+            else:
+                found = entries(ctx, entry_prog, faces, walk, data, flags, targets, src, query,
+                                 start_vao if starting else None, count, layer, marker)
+            if found == 0 and count:
                 break
             if layer == MAX_PASSES:         # the cap: what is left is counted, not walked
                 plan.walk_left = int(query.samples)
@@ -446,140 +418,6 @@ def cell_flags(mesh, visible):
     flags[topology(mesh).flat, 0] |= 2
     flags[:, 0] |= (folded_faces(mesh) * (4 << np.arange(4))).sum(axis=1).astype(np.uint8)
     return flags
-
-
-def start_faces(mesh, camera, walked):
-    """Orthographic: the faces of the (walked, not zero-volume) cells that the rays'
-    start plane cuts, as ``boundary_faces`` lays them out, or None when it cuts none: a
-    ray starting inside one of them starts its walk there (walk_entry.frag, u_start_faces)."""
-    if not camera.is_ortho:
-        return None
-    topo = topology(mesh)
-    depth = (mesh.points - camera.eye) @ camera.forward
-    if not depth.min() < 0.0 < depth.max():
-        return None
-    d = depth[topo.tets]
-    cut = (d.min(axis=1) < 0.0) & (d.max(axis=1) > 0.0) & ~topo.flat
-    if walked is not None:
-        cut &= walked
-    cell = np.repeat(np.flatnonzero(cut), 4)
-    local = np.tile(np.arange(4), len(cell) // 4)
-    vertex = np.dtype([("position", "f4", 3), ("slot", "i4")])
-    out = np.zeros((len(cell), 3), vertex)
-    out["position"] = (mesh.points - mesh.bounds[0])[topo.faces[topo.tet_faces[cell, local]]]
-    out["slot"] = (4 * cell + local)[:, None]
-    return out.reshape(-1)
-
-
-class _StartFaces:
-    """The start faces' vertex buffer, rewritten per view, grown (never shrunk) as needed."""
-
-    def __init__(self, ctx):
-        self.ctx = ctx
-        self.buffer = None
-        self.vaos = {}
-
-    def vao(self, prog, faces):
-        if self.buffer is None or self.buffer.size < faces.nbytes:
-            self.release()
-            self.buffer = self.ctx.buffer(reserve=max(faces.nbytes, 1 << 16))
-        self.buffer.write(faces.tobytes())
-        vao = self.vaos.get(prog.glo)
-        if vao is None:
-            vao = self.vaos[prog.glo] = self.ctx.vertex_array(prog, [(self.buffer, "3f 1i", "a_position", "a_slot")])
-        return vao
-
-    def release(self):
-        for vao in self.vaos.values():
-            vao.release()
-        self.vaos = {}
-        if self.buffer is not None:
-            self.buffer.release()
-            self.buffer = None
-
-
-def _entries(ctx, prog, faces, walk, data, flags, targets, src, query, start=None, count=True, layer=0,
-             marker=None):
-    """The entry pass of ``layer``: each pixel's nearest eligible entry (t, then the
-    smallest cell at that t) into ``targets.entry_t`` and ``entry_cell``, and the pixels
-    that have one marked at ``layer_depth(layer)`` in ``targets.marks`` (``marker``: the
-    marking program and its vertex array; None: no marks, for the compute stage's walk).
-    Returns those pixels' count with ``count`` (0: none, and the second draw is then not
-    made; a count waits for the GPU), else None.
-    After the first layer both draws test the marks early (walk_entry.frag), so that only
-    the pixels marked in the last layer (the first draw) or in this one (the second) are
-    shaded. ``start``: (vertex array, vertices) of the start faces (orthographic rays that
-    start inside the mesh), drawn too."""
-
-    def render(pick):
-        bind(prog, {}, {"u_pick_cell": pick, "u_start_faces": False})
-        faces.render(ctx.TRIANGLES, vertices=walk.face_vertices)
-        if start is not None:
-            bind(prog, {}, {"u_start_faces": True})
-            start[0].render(ctx.TRIANGLES, vertices=start[1])
-
-    def entry_blending():
-        ctx.enable(ctx.BLEND)
-        ctx.blend_func = ctx.ONE, ctx.ONE
-        ctx.blend_equation = ctx.MIN
-
-    def depth_test(func):
-        ctx.enable(ctx.DEPTH_TEST)
-        ctx.depth_func = func
-
-    entry_blending()
-    textures = {"t_planes": data.planes, "t_flags": flags, "t_state": targets.state[src],
-                "t_nearest": targets.entry_t}
-    masked = marker is not None
-    try:
-        targets.entry_t_fbo.use()
-        targets.entry_t_fbo.clear(NO_ENTRY, NO_ENTRY, NO_ENTRY, NO_ENTRY)
-        if masked and layer > 0:
-            depth_test(">=")      # the pixels marked in the last layer
-        (targets.entry_marked_fbo if masked else targets.entry_t_fbo).use()
-        # t_nearest is not read in this draw; bound to a texture not drawn into
-        bind(prog, dict(textures, t_nearest=targets.entry_cell),
-             {"u_test_depth": layer_depth(layer - 1) + MARK_GAP if layer > 0 else 0.5})
-        if masked:
-            render(False)
-            # mark the pixels that have an entry (and count them)
-            ctx.disable(ctx.BLEND)
-            depth_test("1")
-            mark_prog, mark_vao = marker
-            targets.marks_fbo.use()
-            bind(mark_prog, {"t_entry_t": targets.entry_t}, {"u_layer_depth": layer_depth(layer)})
-            if count:
-                with query:
-                    mark_vao.render(ctx.TRIANGLES, vertices=3)
-                if query.samples == 0:
-                    return 0
-            else:
-                mark_vao.render(ctx.TRIANGLES, vertices=3)
-            entry_blending()
-        elif count:     # no marks: the first draw's kept fragments, 0 when no ray has an entry
-            with query:
-                render(False)
-            if query.samples == 0:
-                return 0
-        else:
-            render(False)
-        targets.entry_cell_fbo.use()
-        targets.entry_cell_fbo.clear(NO_ENTRY, NO_ENTRY, NO_ENTRY, NO_ENTRY)
-        if masked:
-            depth_test(">=")          # the pixels just marked
-        (targets.entry_cell_marked_fbo if masked else targets.entry_cell_fbo).use()
-        bind(prog, textures, {"u_test_depth": layer_depth(layer) + MARK_GAP})
-        if count == "pixels" and not masked:
-            with query:               # the pixels left at the cap: the second draw's fragments
-                render(True)
-        else:
-            render(True)
-    finally:
-        ctx.disable(ctx.BLEND | ctx.DEPTH_TEST)
-        ctx.depth_func = "<"
-        ctx.blend_equation = ctx.FUNC_ADD
-        ctx.blend_func = ctx.ONE, ctx.ONE_MINUS_SRC_ALPHA
-    return query.samples if count else None
 
 
 def walk_counts(renderer, plan):

@@ -31,6 +31,19 @@ uniform bool u_start_faces;    // the faces of cells the orthographic start plan
 uniform float u_start_margin;  // how far outside a cell a start still counts (float32 rounding)
 
 out vec4 frag_value;
+// DEPTH_PICK (the first layer, where no pixel is marked yet): one draw finds both the
+// nearest entry's t and its cell. The depth test keeps the fragment of least t (window
+// depth t * u_depth_scale, a power of two below 1 / the farthest t) and, among equal
+// depths, the first drawn: the faces are in the order of their cells, so the smallest.
+// The depth buffer's 24 bits may tie entries less than 2^-24 of the scale apart, whose
+// chord between them is then as short (the float32 image does not see it).
+#ifndef DEPTH_PICK
+#define DEPTH_PICK 0
+#endif
+#if DEPTH_PICK
+layout(location = 1) out vec4 frag_cell;
+uniform float u_depth_scale;
+#endif
 // The depth test before the shader, though it discards (it writes no depth): after the
 // first layer only the pixels marked (techniques/tetra_walk.py) are shaded. Without the
 // extension the same test comes after the shader: the same image, more fragments shaded.
@@ -39,7 +52,7 @@ out vec4 frag_value;
 #ifndef MARKED
 #define MARKED 1
 #endif
-#if MARKED && defined(GL_ARB_shader_image_load_store)
+#if MARKED && !DEPTH_PICK && defined(GL_ARB_shader_image_load_store)
 layout(early_fragment_tests) in;
 #endif
 
@@ -77,6 +90,12 @@ void main() {
     if (dot(cross(ab, x - v_corner0), m) < margin || dot(cross(bc, x - v_corner1), m) < margin
         || dot(cross(ca, x - v_corner2), m) < margin) discard;
     if (!(t_entry > state.x || (t_entry == state.x && float(cell) > state.y))) discard;
+#if DEPTH_PICK
+    frag_value = vec4(t_entry, 0.0, 0.0, 1.0);
+    frag_cell = vec4(float(cell), 0.0, 0.0, 1.0);
+    gl_FragDepth = t_entry * u_depth_scale;
+    return;
+#endif
     if (u_pick_cell) {
         if (t_entry != texelFetch(t_nearest, ivec2(gl_FragCoord.xy), 0).r) discard;
         frag_value = vec4(float(cell), 0.0, 0.0, 1.0);

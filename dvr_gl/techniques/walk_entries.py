@@ -1,0 +1,238 @@
+"""The cell walk's entry passes (``techniques.tetra_walk``; shaders tetra/walk_entry.*,
+tetra/walk_mark.frag): per layer of depth peeling, each pixel's nearest entry into the
+walked cells beyond where its last walk stopped, t and cell, and the marks of the pixels
+that have one; the per-image targets they and the walk draw into."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..model.mesh import topology
+from .common import bind
+
+NO_ENTRY = 3.0e38
+MARK_LEVELS = 128          # the layers' window depths (layer_depth) are 1/MARK_LEVELS apart
+MARK_GAP = 0.5 / MARK_LEVELS   # a test depth halfway to the last layer's: rounding-proof
+FIRST_LAYER_PICK = True    # the first layer's entries in one draw by the depth test (False: two, as later layers)
+
+
+def layer_depth(layer):
+    """The window depth of the pixels that have an entry in ``layer``: falling by layer, so
+    that ``depth <= layer_depth(L - 1)`` (the depth test) keeps the pixels marked in layer
+    L - 1 or later: after the first layer, a pixel pass walks only those (they are fewer
+    each layer, as a pixel without an entry has none in any later layer)."""
+    return 1.0 - (layer + 1) / MARK_LEVELS
+
+
+class WalkTargets:
+    """Per image size: two (accumulation, state) RGBA32F framebuffers used in turn, and
+    the entry pass's two R32F targets (nearest t, its cell)."""
+
+    def __init__(self, ctx, width, height):
+        def tex(components):
+            t = ctx.texture((width, height), components, dtype="f4")
+            t.filter = (ctx.NEAREST, ctx.NEAREST)
+            return t
+        self.acc = [tex(4), tex(4)]
+        self.state = [tex(4), tex(4)]
+        # the layers' marks (layer_depth): written by the entry pass, tested by the next pixel pass
+        self.marks = ctx.depth_renderbuffer((width, height))
+        self.layers = [ctx.framebuffer([self.acc[i], self.state[i]], self.marks) for i in range(2)]
+        for fbo in self.layers:
+            fbo.depth_mask = False
+        self.acc_only = [ctx.framebuffer([t]) for t in self.acc]
+        self.state_only = [ctx.framebuffer([t]) for t in self.state]
+        self.entry_t, self.entry_cell = tex(1), tex(1)
+        self.entry_t_fbo = ctx.framebuffer([self.entry_t])
+        self.entry_marked_fbo = ctx.framebuffer([self.entry_t], self.marks)
+        self.entry_cell_marked_fbo = ctx.framebuffer([self.entry_cell], self.marks)
+        self.marks_fbo = ctx.framebuffer([], self.marks)
+        for fbo in (self.entry_marked_fbo, self.entry_cell_marked_fbo):
+            fbo.depth_mask = False
+        self.entry_cell_fbo = ctx.framebuffer([self.entry_cell])
+        self.entry_pick_fbo = ctx.framebuffer([self.entry_t, self.entry_cell], self.marks)   # (DEPTH_PICK)
+
+    def release(self):
+        for fbo in (*self.layers, *self.acc_only, *self.state_only, self.entry_t_fbo, self.entry_marked_fbo,
+                    self.entry_cell_fbo, self.entry_cell_marked_fbo, self.entry_pick_fbo, self.marks_fbo):
+            fbo.release()
+        self.marks.release()
+        for t in (*self.acc, *self.state, self.entry_t, self.entry_cell):
+            t.release()
+
+
+def start_faces(mesh, camera, walked):
+    """Orthographic: the faces of the (walked, not zero-volume) cells that the rays'
+    start plane cuts, as ``boundary_faces`` lays them out, or None when it cuts none: a
+    ray starting inside one of them starts its walk there (walk_entry.frag, u_start_faces)."""
+    if not camera.is_ortho:
+        return None
+    topo = topology(mesh)
+    depth = (mesh.points - camera.eye) @ camera.forward
+    if not depth.min() < 0.0 < depth.max():
+        return None
+    d = depth[topo.tets]
+    cut = (d.min(axis=1) < 0.0) & (d.max(axis=1) > 0.0) & ~topo.flat
+    if walked is not None:
+        cut &= walked
+    cell = np.repeat(np.flatnonzero(cut), 4)
+    local = np.tile(np.arange(4), len(cell) // 4)
+    vertex = np.dtype([("position", "f4", 3), ("slot", "i4")])
+    out = np.zeros((len(cell), 3), vertex)
+    out["position"] = (mesh.points - mesh.bounds[0])[topo.faces[topo.tet_faces[cell, local]]]
+    out["slot"] = (4 * cell + local)[:, None]
+    return out.reshape(-1)
+
+
+class StartFaces:
+    """The start faces' vertex buffer, rewritten per view, grown (never shrunk) as needed."""
+
+    def __init__(self, ctx):
+        self.ctx = ctx
+        self.buffer = None
+        self.vaos = {}
+
+    def vao(self, prog, faces):
+        if self.buffer is None or self.buffer.size < faces.nbytes:
+            self.release()
+            self.buffer = self.ctx.buffer(reserve=max(faces.nbytes, 1 << 16))
+        self.buffer.write(faces.tobytes())
+        vao = self.vaos.get(prog.glo)
+        if vao is None:
+            vao = self.vaos[prog.glo] = self.ctx.vertex_array(prog, [(self.buffer, "3f 1i", "a_position", "a_slot")])
+        return vao
+
+    def release(self):
+        for vao in self.vaos.values():
+            vao.release()
+        self.vaos = {}
+        if self.buffer is not None:
+            self.buffer.release()
+            self.buffer = None
+
+
+def entries(ctx, prog, faces, walk, data, flags, targets, src, query, start=None, count=True, layer=0,
+             marker=None):
+    """The entry pass of ``layer``: each pixel's nearest eligible entry (t, then the
+    smallest cell at that t) into ``targets.entry_t`` and ``entry_cell``, and the pixels
+    that have one marked at ``layer_depth(layer)`` in ``targets.marks`` (``marker``: the
+    marking program and its vertex array; None: no marks, for the compute stage's walk).
+    Returns those pixels' count with ``count`` (0: none, and the second draw is then not
+    made; a count waits for the GPU), else None.
+    After the first layer both draws test the marks early (walk_entry.frag), so that only
+    the pixels marked in the last layer (the first draw) or in this one (the second) are
+    shaded. ``start``: (vertex array, vertices) of the start faces (orthographic rays that
+    start inside the mesh), drawn too."""
+
+    def render(pick):
+        bind(prog, {}, {"u_pick_cell": pick, "u_start_faces": False})
+        faces.render(ctx.TRIANGLES, vertices=walk.face_vertices)
+        if start is not None:
+            bind(prog, {}, {"u_start_faces": True})
+            start[0].render(ctx.TRIANGLES, vertices=start[1])
+
+    def entry_blending():
+        ctx.enable(ctx.BLEND)
+        ctx.blend_func = ctx.ONE, ctx.ONE
+        ctx.blend_equation = ctx.MIN
+
+    def depth_test(func):
+        ctx.enable(ctx.DEPTH_TEST)
+        ctx.depth_func = func
+
+    entry_blending()
+    textures = {"t_planes": data.planes, "t_flags": flags, "t_state": targets.state[src],
+                "t_nearest": targets.entry_t}
+    masked = marker is not None
+    try:
+        targets.entry_t_fbo.use()
+        targets.entry_t_fbo.clear(NO_ENTRY, NO_ENTRY, NO_ENTRY, NO_ENTRY)
+        if masked and layer > 0:
+            depth_test(">=")      # the pixels marked in the last layer
+        (targets.entry_marked_fbo if masked else targets.entry_t_fbo).use()
+        # t_nearest is not read in this draw; bound to a texture not drawn into
+        bind(prog, dict(textures, t_nearest=targets.entry_cell),
+             {"u_test_depth": layer_depth(layer - 1) + MARK_GAP if layer > 0 else 0.5})
+        if masked:
+            render(False)
+            # mark the pixels that have an entry (and count them)
+            ctx.disable(ctx.BLEND)
+            depth_test("1")
+            mark_prog, mark_vao = marker
+            targets.marks_fbo.use()
+            bind(mark_prog, {"t_entry_t": targets.entry_t}, {"u_layer_depth": layer_depth(layer)})
+            if count:
+                with query:
+                    mark_vao.render(ctx.TRIANGLES, vertices=3)
+                if query.samples == 0:
+                    return 0
+            else:
+                mark_vao.render(ctx.TRIANGLES, vertices=3)
+            entry_blending()
+        elif count:     # no marks: the first draw's kept fragments, 0 when no ray has an entry
+            with query:
+                render(False)
+            if query.samples == 0:
+                return 0
+        else:
+            render(False)
+        targets.entry_cell_fbo.use()
+        targets.entry_cell_fbo.clear(NO_ENTRY, NO_ENTRY, NO_ENTRY, NO_ENTRY)
+        if masked:
+            depth_test(">=")          # the pixels just marked
+        (targets.entry_cell_marked_fbo if masked else targets.entry_cell_fbo).use()
+        bind(prog, textures, {"u_test_depth": layer_depth(layer) + MARK_GAP})
+        if count == "pixels" and not masked:
+            with query:               # the pixels left at the cap: the second draw's fragments
+                render(True)
+        else:
+            render(True)
+    finally:
+        ctx.disable(ctx.BLEND | ctx.DEPTH_TEST)
+        ctx.depth_func = "<"
+        ctx.blend_equation = ctx.FUNC_ADD
+        ctx.blend_func = ctx.ONE, ctx.ONE_MINUS_SRC_ALPHA
+    return query.samples if count else None
+
+
+def depth_scale(scene):
+    """DEPTH_PICK's scale of t to window depth: a power of two (exact) that keeps every
+    t along a ray through the mesh's box below 1 (t: distance from the eye, or from the
+    orthographic rays' start plane)."""
+    lo, hi = scene.volume.bounds
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    farthest = float(np.linalg.norm(corners - np.asarray(scene.camera.eye), axis=1).max())
+    return 2.0 ** -math.frexp(max(farthest, 1e-30) * 1.01)[1]
+
+
+def first_entries(ctx, prog, walk, data, flags, targets, src, query, count, marker, scale):
+    """The first layer's entry pass in one draw (walk_entry.frag, DEPTH_PICK): each
+    pixel's nearest entry t and its cell by the depth test, then the marks as ``_entries``
+    makes them. Returns the pixels with an entry with ``count``, else None."""
+    faces = walk.vao(ctx, prog)
+    try:
+        ctx.disable(ctx.BLEND)
+        ctx.enable(ctx.DEPTH_TEST)
+        ctx.depth_func = "<"
+        targets.entry_pick_fbo.use()
+        targets.entry_pick_fbo.clear(NO_ENTRY, NO_ENTRY, NO_ENTRY, NO_ENTRY, depth=1.0)
+        # t_nearest is not read in this draw; bound to a texture not drawn into
+        bind(prog, {"t_planes": data.planes, "t_flags": flags, "t_state": targets.state[src],
+                    "t_nearest": targets.acc[src]},
+             {"u_test_depth": 0.5, "u_depth_scale": scale, "u_pick_cell": False, "u_start_faces": False})
+        faces.render(ctx.TRIANGLES, vertices=walk.face_vertices)
+        ctx.depth_func = "1"          # the marks: the layer's depth where a pixel has an entry
+        mark_prog, mark_vao = marker
+        targets.marks_fbo.use()
+        bind(mark_prog, {"t_entry_t": targets.entry_t}, {"u_layer_depth": layer_depth(0)})
+        if not count:
+            mark_vao.render(ctx.TRIANGLES, vertices=3)
+            return None
+        with query:
+            mark_vao.render(ctx.TRIANGLES, vertices=3)
+        return query.samples
+    finally:
+        ctx.disable(ctx.DEPTH_TEST)
+        ctx.depth_func = "<"
