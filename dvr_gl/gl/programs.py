@@ -164,8 +164,9 @@ class ProgramCache:
 
 
 class ComputeProgram:
-    """A compute shader with a program's lookups (``name in prog``, ``prog[name]``), so
-    that the techniques bind it as they bind a fragment program."""
+    """A compute shader with a program's lookups (``name in prog``, ``prog[name]``,
+    ``prog.get(name, default)``), so that the techniques bind it as they bind a fragment
+    program."""
 
     def __init__(self, shader):
         self.shader = shader
@@ -178,6 +179,9 @@ class ComputeProgram:
 
     def __getitem__(self, name):
         return self.shader[name]
+
+    def get(self, name, default):
+        return self.shader._members.get(name, default)
 
     def run(self, groups_x, groups_y):
         self.shader.run(groups_x, groups_y, 1)

@@ -289,14 +289,16 @@ def bind(prog, textures, uniforms, first_unit=0):
     uniforms the program has (the compiler drops those a variant does not use)."""
     for unit, (name, tex) in enumerate(textures.items(), start=first_unit):
         tex.use(location=unit)
-        if name in prog:
-            prog[name].value = unit
+        member = prog.get(name, None)       # (not `name in prog`: moderngl's walks every member)
+        if member is not None:
+            member.value = unit
     for name, value in uniforms.items():
-        if name in prog:
+        member = prog.get(name, None)
+        if member is not None:
             if isinstance(value, bytes):       # a uniform array, written whole
-                prog[name].write(value)
+                member.write(value)
             else:
-                prog[name].value = value
+                member.value = value
 
 
 def eye_view_projection(scene, near, far):
