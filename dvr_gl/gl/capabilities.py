@@ -50,6 +50,26 @@ def max_3d_texture_size(ctx) -> int:
     return int(size) if size else 256
 
 
+# the timing probes' full-screen triangle
+_FULL_SCREEN = ("#version 330 core\nvoid main() { vec2 p = vec2(gl_VertexID == 1 ? 3.0 : -1.0, "
+                "gl_VertexID == 2 ? 3.0 : -1.0); gl_Position = vec4(p, 0.0, 1.0); }")
+
+
+def _best_seconds(ctx, run, repeats):
+    """The least wall time to glFinish of ``repeats`` runs of ``run`` after one unmeasured
+    run (the least disturbed by other work on the machine; llvmpipe's timer queries miss
+    compute work)."""
+    run()
+    ctx.finish()
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        run()
+        ctx.finish()
+        times.append(time.perf_counter() - start)
+    return min(times)
+
+
 # a loop whose rounds hold costly code under a branch: taken by every pixel or by none
 _BRANCH_PROBE = """#version 330 core
 uniform int u_rounds;
@@ -85,23 +105,14 @@ def lockstep_lanes(ctx, side=64, min_seconds=2e-3) -> bool:
         target = ctx.texture((side, side), 4, dtype="f4")
         fbo = ctx.framebuffer(color_attachments=[target])
         prog = ctx.program(
-            vertex_shader="#version 330 core\nvoid main() { vec2 p = vec2(gl_VertexID == 1 ? 3.0 : -1.0, "
-                          "gl_VertexID == 2 ? 3.0 : -1.0); gl_Position = vec4(p, 0.0, 1.0); }",
+            vertex_shader=_FULL_SCREEN,
             fragment_shader=_BRANCH_PROBE)
         vao = ctx.vertex_array(prog, [])
         try:
             def seconds(threshold):
                 prog["u_threshold"].value = threshold
                 fbo.use()
-                vao.render(vertices=3)
-                ctx.finish()
-                times = []
-                for _ in range(3):
-                    start = time.perf_counter()
-                    vao.render(vertices=3)
-                    ctx.finish()
-                    times.append(time.perf_counter() - start)
-                return min(times)
+                return _best_seconds(ctx, lambda: vao.render(vertices=3), 3)
 
             rounds = 16
             while True:
@@ -150,8 +161,7 @@ def pixel_stage_times(ctx, side=256, min_seconds=2e-3):
         target = ctx.texture((side, side), 4, dtype="f4")
         fbo = ctx.framebuffer(color_attachments=[target])
         frag = ctx.program(
-            vertex_shader="#version 330 core\nvoid main() { vec2 p = vec2(gl_VertexID == 1 ? 3.0 : -1.0, "
-                          "gl_VertexID == 2 ? 3.0 : -1.0); gl_Position = vec4(p, 0.0, 1.0); }",
+            vertex_shader=_FULL_SCREEN,
             fragment_shader="#version 330 core\n" + _PROBE_LOOP
                             + "out vec4 f_color;\nvoid main() { f_color = probeColumn(gl_FragCoord.xy); }")
         comp = ctx.compute_shader(
@@ -174,16 +184,8 @@ def pixel_stage_times(ctx, side=256, min_seconds=2e-3):
                 comp.run(side // 8, side // 8, 1)
                 ctx.memory_barrier()
 
-            def seconds(run):       # (wall time to glFinish: llvmpipe's timer queries miss compute work)
-                run()
-                ctx.finish()
-                times = []
-                for _ in range(5):
-                    start = time.perf_counter()
-                    run()
-                    ctx.finish()
-                    times.append(time.perf_counter() - start)
-                return min(times)       # (the least disturbed by other work on the machine)
+            def seconds(run):
+                return _best_seconds(ctx, run, 5)
 
             samples = 16
             while True:

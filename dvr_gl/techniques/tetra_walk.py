@@ -291,8 +291,10 @@ def draw(renderer, plan, data, texture):
                                        dict(view, MARKED=0) if compute else view, geometry="tetra/walk_entry.geom")
     # the first layer's entries in one draw (DEPTH_PICK), where its depth test is free: the
     # fragment stage, no start faces, the eye outside the mesh
-    pick_prog = None if compute or not walk_entries.FIRST_LAYER_PICK else renderer.programs.get("tetra/walk_entry.vert", "tetra/walk_entry.frag",
-                                                           dict(view, DEPTH_PICK=1), geometry="tetra/walk_entry.geom")
+    pick_prog = None
+    if not compute and walk_entries.FIRST_LAYER_PICK:
+        pick_prog = renderer.programs.get("tetra/walk_entry.vert", "tetra/walk_entry.frag", dict(view, DEPTH_PICK=1),
+                                          geometry="tetra/walk_entry.geom")
     mark_prog = renderer.programs.get("tetra/walk_layer.vert", "tetra/walk_mark.frag")
     walk_defines = {**plan.defines, **renderer.tables.get("tetra_walk_rare_paths", mesh, make=rare_paths)}
     walk_prog = (renderer.programs.compute("tetra/walk.frag", walk_defines) if compute else

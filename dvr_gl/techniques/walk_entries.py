@@ -157,19 +157,9 @@ def entries(ctx, prog, faces, walk, data, flags, targets, src, query, start=None
              {"u_test_depth": layer_depth(layer - 1) + MARK_GAP if layer > 0 else 0.5})
         if masked:
             render(False)
-            # mark the pixels that have an entry (and count them)
             ctx.disable(ctx.BLEND)
-            depth_test("1")
-            mark_prog, mark_vao = marker
-            targets.marks_fbo.use()
-            bind(mark_prog, {"t_entry_t": targets.entry_t}, {"u_layer_depth": layer_depth(layer)})
-            if count:
-                with query:
-                    mark_vao.render(ctx.TRIANGLES, vertices=3)
-                if query.samples == 0:
-                    return 0
-            else:
-                mark_vao.render(ctx.TRIANGLES, vertices=3)
+            if mark(ctx, targets, marker, layer, query, count) == 0:
+                return 0
             entry_blending()
         elif count:     # no marks: the first draw's kept fragments, 0 when no ray has an entry
             with query:
@@ -197,6 +187,24 @@ def entries(ctx, prog, faces, walk, data, flags, targets, src, query, start=None
     return query.samples if count else None
 
 
+def mark(ctx, targets, marker, layer, query, count):
+    """After a layer's entries, mark the pixels that have one at ``layer_depth(layer)`` in
+    ``targets.marks`` (``marker``: the marking program and its vertex array); returns their
+    count with ``count`` (an occlusion query, which waits for the GPU), else None. Leaves the
+    depth test on."""
+    ctx.enable(ctx.DEPTH_TEST)
+    ctx.depth_func = "1"
+    mark_prog, mark_vao = marker
+    targets.marks_fbo.use()
+    bind(mark_prog, {"t_entry_t": targets.entry_t}, {"u_layer_depth": layer_depth(layer)})
+    if not count:
+        mark_vao.render(ctx.TRIANGLES, vertices=3)
+        return None
+    with query:
+        mark_vao.render(ctx.TRIANGLES, vertices=3)
+    return query.samples
+
+
 def depth_scale(scene):
     """DEPTH_PICK's scale of t to window depth: a power of two (exact) that keeps every
     t along a ray through the mesh's box below 1 (t: distance from the eye, or from the
@@ -209,8 +217,8 @@ def depth_scale(scene):
 
 def first_entries(ctx, prog, walk, data, flags, targets, src, query, count, marker, scale):
     """The first layer's entry pass in one draw (walk_entry.frag, DEPTH_PICK): each
-    pixel's nearest entry t and its cell by the depth test, then the marks as ``_entries``
-    makes them. Returns the pixels with an entry with ``count``, else None."""
+    pixel's nearest entry t and its cell by the depth test, then the marks (``mark``).
+    Returns the pixels with an entry with ``count``, else None."""
     faces = walk.vao(ctx, prog)
     try:
         ctx.disable(ctx.BLEND)
@@ -223,16 +231,7 @@ def first_entries(ctx, prog, walk, data, flags, targets, src, query, count, mark
                     "t_nearest": targets.acc[src]},
              {"u_test_depth": 0.5, "u_depth_scale": scale, "u_pick_cell": False, "u_start_faces": False})
         faces.render(ctx.TRIANGLES, vertices=walk.face_vertices)
-        ctx.depth_func = "1"          # the marks: the layer's depth where a pixel has an entry
-        mark_prog, mark_vao = marker
-        targets.marks_fbo.use()
-        bind(mark_prog, {"t_entry_t": targets.entry_t}, {"u_layer_depth": layer_depth(0)})
-        if not count:
-            mark_vao.render(ctx.TRIANGLES, vertices=3)
-            return None
-        with query:
-            mark_vao.render(ctx.TRIANGLES, vertices=3)
-        return query.samples
+        return mark(ctx, targets, marker, 0, query, count)
     finally:
         ctx.disable(ctx.DEPTH_TEST)
         ctx.depth_func = "<"

@@ -135,6 +135,13 @@ int knotsBelow(float s, bool strict) {
     return lo;
 }
 
+// Where the piece of interval j ends on a segment going up (or down) to s_back: at the
+// interval's next knot in that direction, or at s_back if it comes first.
+float pieceEnd(int j, bool up, float s_back) {
+    if (up) return j + 1 <= u_knot_count - 1 ? min(knotValue(j + 1), s_back) : s_back;
+    return j >= 0 ? max(knotValue(j), s_back) : s_back;
+}
+
 // Premultiplied (C, A) of a segment len long, the field going linearly from s_front
 // (nearest the eye) to s_back, with the colour times a factor going linearly from
 // q_front to q_back along it (a depth cue; 1 and 1 without one). cued_alpha is the
@@ -149,12 +156,7 @@ vec4 linearSegmentCued(float s_front, float s_back, float len, float q_front, fl
     float alpha_acc = 0.0;
     float a = s_front;
     for (int piece = 0; piece <= u_knot_count; piece++) {
-        float b;
-        if (up) {
-            b = j + 1 <= u_knot_count - 1 ? min(knotValue(j + 1), s_back) : s_back;
-        } else {
-            b = j >= 0 ? max(knotValue(j), s_back) : s_back;
-        }
+        float b = pieceEnd(j, up, s_back);
         float l = ds > 0.0 ? len * (abs(b - a) / ds) : len;
         vec3 ca, cb;
         float aa, wa, ab, wb;
@@ -282,8 +284,7 @@ vec4 lightSegment(float s_front, float s_back, float len, out bool light) {
     float a = s_front;
     light = len > 0.0;
     for (int piece = 0; piece <= u_knot_count; piece++) {     // as linearSegment's pieces
-        float b = up ? (j + 1 <= u_knot_count - 1 ? min(knotValue(j + 1), s_back) : s_back)
-                     : (j >= 0 ? max(knotValue(j), s_back) : s_back);
+        float b = pieceEnd(j, up, s_back);
         float l = ds > 0.0 ? len * (abs(b - a) / ds) : len;
         vec3 ca, cb;
         float aa, wa, ab, wb;
