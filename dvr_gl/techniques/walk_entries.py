@@ -13,17 +13,25 @@ from ..model.mesh import topology
 from .common import bind
 
 NO_ENTRY = 3.0e38
-MARK_LEVELS = 128          # the layers' window depths (layer_depth) are 1/MARK_LEVELS apart
-MARK_GAP = 0.5 / MARK_LEVELS   # a test depth halfway to the last layer's: rounding-proof
+MARK_LEVELS = 256          # the marks' window depths (layer_depth, alive_depth) are 1/MARK_LEVELS apart
+MARK_GAP = 0.5 / MARK_LEVELS   # a test depth halfway to the last mark's: rounding-proof
 FIRST_LAYER_PICK = True    # the first layer's entries in one draw by the depth test (False: two, as later layers)
 
 
 def layer_depth(layer):
-    """The window depth of the pixels that have an entry in ``layer``: falling by layer, so
-    that ``depth <= layer_depth(L - 1)`` (the depth test) keeps the pixels marked in layer
-    L - 1 or later: after the first layer, a pixel pass walks only those (they are fewer
-    each layer, as a pixel without an entry has none in any later layer)."""
-    return 1.0 - (layer + 1) / MARK_LEVELS
+    """The window depth of the pixels that have an entry in ``layer``: falling by layer
+    (and after ``alive_depth(layer - 1)``), so that ``depth <= layer_depth(L) + MARK_GAP``
+    (the depth test) keeps the pixels marked in layer L or later; while layer L is drawn,
+    no pixel has a later mark yet. A pixel without an entry has none in any later layer,
+    so each layer's pixels are among the last's."""
+    return 1.0 - (2 * layer + 1) / MARK_LEVELS
+
+
+def alive_depth(layer):
+    """The window depth of the pixels whose walk in ``layer`` left the mesh without ending
+    (the walk in place, tetra_walk.py): only they can enter it again, so only they are
+    shaded by the next layer's first entry draw."""
+    return 1.0 - (2 * layer + 2) / MARK_LEVELS
 
 
 class WalkTargets:
@@ -40,7 +48,9 @@ class WalkTargets:
         # the layers' marks (layer_depth): written by the entry pass, tested by the next pixel pass
         self.marks = ctx.depth_renderbuffer((width, height))
         self.layers = [ctx.framebuffer([self.acc[i], self.state[i]], self.marks) for i in range(2)]
-        for fbo in self.layers:
+        # the walk in place stores into acc[0] and state[0] as images, and draws into nothing
+        self.in_place = ctx.framebuffer([], self.marks)
+        for fbo in (*self.layers, self.in_place):
             fbo.depth_mask = False
         self.acc_only = [ctx.framebuffer([t]) for t in self.acc]
         self.state_only = [ctx.framebuffer([t]) for t in self.state]
@@ -55,7 +65,7 @@ class WalkTargets:
         self.entry_pick_fbo = ctx.framebuffer([self.entry_t, self.entry_cell], self.marks)   # (DEPTH_PICK)
 
     def release(self):
-        for fbo in (*self.layers, *self.acc_only, *self.state_only, self.entry_t_fbo, self.entry_marked_fbo,
+        for fbo in (*self.layers, self.in_place, *self.acc_only, *self.state_only, self.entry_t_fbo, self.entry_marked_fbo,
                     self.entry_cell_fbo, self.entry_cell_marked_fbo, self.entry_pick_fbo, self.marks_fbo):
             fbo.release()
         self.marks.release()
@@ -113,22 +123,24 @@ class StartFaces:
             self.buffer = None
 
 
-def entries(ctx, prog, faces, walk, data, flags, targets, src, query, start=None, count=True, layer=0,
-             marker=None):
+def entries(ctx, prog, faces, data, flags, targets, src, query, start=None, count=True, layer=0,
+             marker=None, alive_marks=False):
     """The entry pass of ``layer``: each pixel's nearest eligible entry (t, then the
     smallest cell at that t) into ``targets.entry_t`` and ``entry_cell``, and the pixels
     that have one marked at ``layer_depth(layer)`` in ``targets.marks`` (``marker``: the
     marking program and its vertex array; None: no marks, for the compute stage's walk).
-    Returns those pixels' count with ``count`` (0: none, and the second draw is then not
-    made; a count waits for the GPU), else None.
+    ``faces``: (vertex array, vertices) of the boundary faces. ``query`` counts the pixels
+    with an entry; ``count``: returns that count (0: none, and the second draw is then
+    not made; a count waits for the GPU), else None.
     After the first layer both draws test the marks early (walk_entry.frag), so that only
-    the pixels marked in the last layer (the first draw) or in this one (the second) are
-    shaded. ``start``: (vertex array, vertices) of the start faces (orthographic rays that
-    start inside the mesh), drawn too."""
+    the pixels marked in the last layer (the first draw; ``alive_marks``: those marked
+    alive by ``mark_alive``) or in this one (the second) are shaded. ``start``: (vertex
+    array, vertices) of the start faces (orthographic rays that start inside the mesh),
+    drawn too."""
 
     def render(pick):
         bind(prog, {}, {"u_pick_cell": pick, "u_start_faces": False})
-        faces.render(ctx.TRIANGLES, vertices=walk.face_vertices)
+        faces[0].render(ctx.TRIANGLES, vertices=faces[1])
         if start is not None:
             bind(prog, {}, {"u_start_faces": True})
             start[0].render(ctx.TRIANGLES, vertices=start[1])
@@ -153,21 +165,20 @@ def entries(ctx, prog, faces, walk, data, flags, targets, src, query, start=None
             depth_test(">=")      # the pixels marked in the last layer
         (targets.entry_marked_fbo if masked else targets.entry_t_fbo).use()
         # t_nearest is not read in this draw; bound to a texture not drawn into
+        last = (alive_depth if alive_marks else layer_depth)(layer - 1)
         bind(prog, dict(textures, t_nearest=targets.entry_cell),
-             {"u_test_depth": layer_depth(layer - 1) + MARK_GAP if layer > 0 else 0.5})
+             {"u_test_depth": last + MARK_GAP if layer > 0 else 0.5})
         if masked:
             render(False)
             ctx.disable(ctx.BLEND)
             if mark(ctx, targets, marker, layer, query, count) == 0:
                 return 0
             entry_blending()
-        elif count:     # no marks: the first draw's kept fragments, 0 when no ray has an entry
+        else:           # no marks: the first draw's kept fragments, 0 when no ray has an entry
             with query:
                 render(False)
-            if query.samples == 0:
+            if count and query.samples == 0:
                 return 0
-        else:
-            render(False)
         targets.entry_cell_fbo.use()
         targets.entry_cell_fbo.clear(NO_ENTRY, NO_ENTRY, NO_ENTRY, NO_ENTRY)
         if masked:
@@ -187,22 +198,32 @@ def entries(ctx, prog, faces, walk, data, flags, targets, src, query, start=None
     return query.samples if count else None
 
 
-def mark(ctx, targets, marker, layer, query, count):
+def mark(ctx, targets, marker, layer, query, count, depth=None, state=None):
     """After a layer's entries, mark the pixels that have one at ``layer_depth(layer)`` in
-    ``targets.marks`` (``marker``: the marking program and its vertex array); returns their
-    count with ``count`` (an occlusion query, which waits for the GPU), else None. Leaves the
-    depth test on."""
+    ``targets.marks`` (``marker``: the marking program and its vertex array), counted by
+    ``query`` (an occlusion query); returns the count with ``count`` (which waits for the
+    GPU), else None. ``depth`` and ``state`` (``mark_alive``): that depth instead, for the
+    pixels among them whose ``state`` says the ray goes on. Leaves the depth test on."""
     ctx.enable(ctx.DEPTH_TEST)
     ctx.depth_func = "1"
     mark_prog, mark_vao = marker
     targets.marks_fbo.use()
-    bind(mark_prog, {"t_entry_t": targets.entry_t}, {"u_layer_depth": layer_depth(layer)})
-    if not count:
-        mark_vao.render(ctx.TRIANGLES, vertices=3)
-        return None
+    bind(mark_prog, {"t_entry_t": targets.entry_t, "t_state": state if state is not None else targets.entry_t},
+         {"u_layer_depth": layer_depth(layer) if depth is None else depth, "u_alive": state is not None})
     with query:
         mark_vao.render(ctx.TRIANGLES, vertices=3)
-    return query.samples
+    return query.samples if count else None
+
+
+def mark_alive(ctx, targets, marker, layer, state, query):
+    """After the walk of ``layer`` in place: the pixels it walked whose ray left the mesh
+    without ending, marked at ``alive_depth(layer)``, so that the next layer's first entry
+    draw shades only them (``entries``, ``alive_marks``). Not counted."""
+    try:
+        mark(ctx, targets, marker, layer, query, False, alive_depth(layer), state)
+    finally:
+        ctx.disable(ctx.DEPTH_TEST)
+        ctx.depth_func = "<"
 
 
 def depth_scale(scene):
@@ -215,11 +236,11 @@ def depth_scale(scene):
     return 2.0 ** -math.frexp(max(farthest, 1e-30) * 1.01)[1]
 
 
-def first_entries(ctx, prog, walk, data, flags, targets, src, query, count, marker, scale):
+def first_entries(ctx, prog, faces, data, flags, targets, src, query, count, marker, scale):
     """The first layer's entry pass in one draw (walk_entry.frag, DEPTH_PICK): each
     pixel's nearest entry t and its cell by the depth test, then the marks (``mark``).
+    ``faces``: (vertex array, vertices) of the boundary faces in the order of their cells.
     Returns the pixels with an entry with ``count``, else None."""
-    faces = walk.vao(ctx, prog)
     try:
         ctx.disable(ctx.BLEND)
         ctx.enable(ctx.DEPTH_TEST)
@@ -230,7 +251,7 @@ def first_entries(ctx, prog, walk, data, flags, targets, src, query, count, mark
         bind(prog, {"t_planes": data.planes, "t_flags": flags, "t_state": targets.state[src],
                     "t_nearest": targets.acc[src]},
              {"u_test_depth": 0.5, "u_depth_scale": scale, "u_pick_cell": False, "u_start_faces": False})
-        faces.render(ctx.TRIANGLES, vertices=walk.face_vertices)
+        faces[0].render(ctx.TRIANGLES, vertices=faces[1])
         return mark(ctx, targets, marker, 0, query, count)
     finally:
         ctx.disable(ctx.DEPTH_TEST)

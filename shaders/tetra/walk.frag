@@ -17,6 +17,9 @@
 #ifdef GL_ARB_shader_group_vote
 #extension GL_ARB_shader_group_vote : enable    // anyInvocationARB (WALK_LIGHT)
 #endif
+#if defined(IN_PLACE) && IN_PLACE
+#extension GL_ARB_shader_image_load_store : require
+#endif
 
 #ifndef ORTHO
 #define ORTHO 0
@@ -62,6 +65,18 @@
 // every segment would otherwise pay for linearSegment's loops and branches
 #define WALK_LIGHT (LOCKSTEP_LANES && MODE_COMPOSITE && !SAMPLE_TERMS && !SEGMENT_TABLE && OPTICAL_MODEL == 0)
 #define WALK_OUTER (WALK_FLAT || WALK_FOLDS || WALK_LIGHT)
+// In place (the fragment stage, with image load/store): the accumulation and state are
+// read and written in one pair of images, so a layer shades only the pixels that have an
+// entry in it; else they are read from the last layer's targets and written to the
+// others, and the pixels that ended in the last layer are copied across.
+#ifndef IN_PLACE
+#define IN_PLACE 0
+#endif
+#if IN_PLACE
+layout(early_fragment_tests) in;    // the marks' test, before the shader (it has side effects)
+layout(rgba32f) uniform coherent image2D u_acc_image;
+layout(rgba32f) uniform coherent image2D u_state_image;
+#endif
 
 #include "common/camera_ray.glsl"
 #include "common/linear_segment.glsl"
@@ -133,9 +148,11 @@ vec4 tableSegment(float s_front, float s_back, float len) {
 }
 #endif
 
-#if COMPUTE_PIXELS
+#if COMPUTE_PIXELS || IN_PLACE
 vec4 frag_acc;                    // stored by main() at the end
 vec4 frag_state;
+#undef PIXEL_MAIN
+#define PIXEL_MAIN shadePixel
 #else
 layout(location = 0) out vec4 frag_acc;
 layout(location = 1) out vec4 frag_state;
@@ -153,6 +170,10 @@ const uint FLAT = 2u;
 const uint FOLDS = 60u;      // 4 << k: local face k is shared with a folded cell
 const int RARE_FLAT = 1;
 const int RARE_FOLD = 2;
+const int HULL = -2;         // t_neighbours: across a boundary face on the convex hull (tetra_walk.HULL)
+// A ray leaving through the hull has nothing left to enter, but for rounding where it
+// grazes the face: at least this rate outwards (the cosine to the face's normal)
+const float HULL_ALONG = 1e-3;
 
 // A cell with folded faces (a neighbour on the same side of their shared face, as some
 // curvilinear grids have) that offers the ray no way on: the ray may go on in a folded
@@ -214,8 +235,13 @@ int flatExit(int cell, vec3 x, vec3 dir, ivec4 nb, int prev) {
 
 void PIXEL_MAIN() {
     ivec2 px = ivec2(FRAG_COORD.xy);
+#if IN_PLACE
+    vec4 acc = imageLoad(u_acc_image, px);
+    vec4 state = imageLoad(u_state_image, px);
+#else
     vec4 acc = texelFetch(t_acc, px, 0);
     vec4 state = texelFetch(t_state, px, 0);
+#endif
     frag_acc = acc;
     frag_state = vec4(DONE, -1.0, state.z, state.w);
     if (state.x >= 1.0e38) return;
@@ -322,6 +348,7 @@ void PIXEL_MAIN() {
                     stalled = t_end > t_cur ? 0 : stalled + 1;
                     t_cur = max(t_cur, t_end);
                     next = t_out < 1.0e38 ? nb[face] : -1;     // none: no leaving plane but the way back
+                    if (next == HULL && along[face] > HULL_ALONG) done = true;   // no re-entry: no next layer
 #if WALK_FOLDS
                     if (next < 0 && (flags & FOLDS) != 0u) rare = RARE_FOLD;   // the outer loop finds the way on
 #endif
@@ -449,7 +476,14 @@ void PIXEL_MAIN() {
     }
 }
 
-#if COMPUTE_PIXELS
+#if IN_PLACE
+void main() {
+    shadePixel();
+    ivec2 px = ivec2(gl_FragCoord.xy);
+    imageStore(u_acc_image, px, frag_acc);
+    imageStore(u_state_image, px, frag_state);
+}
+#elif COMPUTE_PIXELS
 // the compute stage (common/pixel_stage.glsl): one invocation per pixel, both outputs stored
 layout(local_size_x = 8, local_size_y = 8) in;
 layout(rgba32f, binding = 0) uniform writeonly image2D u_acc_out;
