@@ -41,6 +41,10 @@ MANY = TransferFunction([(0.0, 0.2, 0.2, 0.8), (1.0, 0.8, 0.3, 0.2)],
 # a knot of opacity 1: pieces reaching it end the ray (never light)
 OPAQUE = TransferFunction([(0.0, 0.3, 0.3, 0.9), (1.0, 0.9, 0.3, 0.3)], [(0.0, 0.0), (0.7, 0.4), (1.0, 1.0)],
                           unit_distance=0.5)
+# a steep, dense band among faint values: runs of segments that are not light, between light
+# ones (each waits in the outer loop's pending slot, a second in its held one)
+STEEP = TransferFunction([(0.0, 0.2, 0.4, 0.9), (1.0, 0.9, 0.5, 0.1)],
+                         [(0.0, 0.02), (0.45, 0.05), (0.5, 0.95), (0.55, 0.05), (1.0, 0.3)], unit_distance=0.3)
 
 
 def _light_segments(renderer, tf, sf, sb, length):
@@ -133,9 +137,10 @@ def _scenes():
     folded = TetMesh(pts, np.array([[0, 1, 2, 3], [1, 2, 3, 4]]), np.array([0.1, 0.9, 0.4, 0.6, 0.5]))
     yield "folded pair", Scene(folded, RAMP, Camera((2.0, 1.5, 1.8), (0.3, 0.3, 0.3), fov=35), 40, 40)
     yield "opaque knot", Scene(ball, OPAQUE, dvr_gl.default_camera(ball, azimuth=60, elevation=10), 48, 48)
+    yield "steep band", Scene(ball, STEEP, dvr_gl.default_camera(ball, azimuth=10, elevation=40), 48, 48)
 
 
-@pytest.mark.parametrize("name", ["ball", "flat cell", "folded pair", "opaque knot"])
+@pytest.mark.parametrize("name", ["ball", "flat cell", "folded pair", "opaque knot", "steep band"])
 def test_lockstep_walk_is_the_same_image(lockstep_renderers, name):
     """The walk built for lockstep lanes (light segments inline, the rest and the rare
     steps in the outer loop) and without: the same image within 2e-6, no guard reached."""

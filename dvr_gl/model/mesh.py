@@ -335,11 +335,13 @@ def _convex_hull(points, volume):
 
 
 def cell_fields(mesh):
-    """(M, 3, 4) float64: per cell (gradient of the linear field, value at the centroid),
-    (centroid, 0), positions relative to the mesh's lower corner, and (smallest, largest
-    vertex value, 0, 0): a fragment clamps its end values to that range, which its
+    """(M, 2, 4) float64: per cell (gradient of the linear field, its value at the mesh's
+    lower corner, the origin of the shaders' positions: s(x) = g . x + w) and (smallest,
+    largest vertex value, 0, 0): a fragment clamps its end values to that range, which its
     float32 extrapolation can leave in a sliver (a gradient of 3e7 made values 10 data
-    units off). Zero-volume cells get a zero gradient (they are never drawn)."""
+    units off). The shaders take s at the eye, whose distance from the cell already
+    scales their rounding as a point inside it would. Zero-volume cells get a zero
+    gradient (they are never drawn)."""
     topo = topology(mesh)
     lo = mesh.bounds[0]
     p = mesh.points[topo.tets] - lo                 # (M, 4, 3)
@@ -349,10 +351,9 @@ def cell_fields(mesh):
     grad = np.zeros((len(p), 3))
     ok = ~topo.flat
     grad[ok] = np.linalg.solve(A[ok], b[ok][..., None])[..., 0]
-    out = np.zeros((len(p), 3, 4))
+    out = np.zeros((len(p), 2, 4))
     out[:, 0, :3] = grad
-    out[:, 0, 3] = s.mean(axis=1)
-    out[:, 1, :3] = p.mean(axis=1)
-    out[:, 2, 0] = topo.cell_min
-    out[:, 2, 1] = topo.cell_max
+    out[:, 0, 3] = s.mean(axis=1) - np.einsum("mj,mj->m", grad, p.mean(axis=1))
+    out[:, 1, 0] = topo.cell_min
+    out[:, 1, 1] = topo.cell_max
     return out

@@ -25,8 +25,8 @@ uniform isampler2D t_order;   // R32I: draw slot -> cell
 uniform isampler2D t_tets;    // RGBA32I: cell -> its four points (positively oriented)
 uniform sampler2D t_points;   // RGBA32F: point -> position relative to the mesh's lower corner
 uniform sampler2D t_planes;   // RGBA32F, 4 per cell: outward unit normal, offset (n.x = d)
-uniform sampler2D t_field;    // RGBA32F, 3 per cell: (gradient, value at centroid), centroid,
-                              // (smallest, largest vertex value)
+uniform sampler2D t_field;    // RGBA32F, 2 per cell: (gradient, value at the origin),
+                              // (smallest, largest vertex value) (model.mesh.cell_fields)
 uniform sampler2D t_outline01;  // RGBA32F, 1 per draw slot: the grown outline's corners
 uniform sampler2D t_outline23;  // 0, 1 and 2, 3 in window coordinates (outline.frag)
 uniform mat4 u_view_proj;
@@ -58,10 +58,9 @@ void main() {
     v_normals = mat3x4(vec4(p0.x, p1.x, p2.x, p3.x), vec4(p0.y, p1.y, p2.y, p3.y), vec4(p0.z, p1.z, p2.z, p3.z));
     PRECISE vec4 room = vec4(p0.w, p1.w, p2.w, p3.w) - v_normals * u_eye;   // common/precise.glsl
     v_room = room;
-    vec4 field = texelFetch(t_field, texelRow(3 * cell), 0);
-    vec3 centre = texelFetch(t_field, texelRow(3 * cell + 1), 0).xyz;
-    v_range = texelFetch(t_field, texelRow(3 * cell + 2), 0).xy;
-    v_field = vec4(field.xyz, field.w + dot(field.xyz, u_eye - centre));
+    vec4 field = texelFetch(t_field, texelRow(2 * cell), 0);
+    v_range = texelFetch(t_field, texelRow(2 * cell + 1), 0).xy;
+    v_field = vec4(field.xyz, field.w + dot(field.xyz, u_eye));
 
     if (u_exact_faces) {
         ivec4 corners = texelFetch(t_tets, texelRow(cell), 0);

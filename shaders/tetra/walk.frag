@@ -87,7 +87,7 @@ layout(rgba32f) uniform coherent image2D u_state_image;
 #include "common/shading.glsl"
 #endif
 
-uniform sampler2D t_field;        // RGBA32F, 3 per cell: (gradient, value at centroid), centroid, range
+uniform sampler2D t_field;        // RGBA32F, 2 per cell: (gradient, value at the origin), range (model.mesh.cell_fields)
 uniform isampler2D t_neighbours;  // RGBA32I per cell: the cell across local face k (-1: boundary)
 uniform usampler2D t_flags;       // R8UI per cell: SHOWN (the TF gives some of its value range
                                   // opacity), FLAT (zero volume)
@@ -288,8 +288,15 @@ void PIXEL_MAIN() {
     int stalled = 0;        // steps in a row that took the ray no further
 #if WALK_OUTER
     int rare = 0;           // RARE_FLAT: at zero-volume `cell`; RARE_FOLD: `cell` left by a folded face
-    bool pending = false;   // a segment that is not light, to add in the outer loop
-    vec3 pending_segment;   // its (s_front, s_back, length)
+    // With lanes in lockstep, the segments that are not light wait for the outer loop: the
+    // first in `pending`, while the light ones behind it gather in `behind` (front to back;
+    // compositing is associative, so they join it there), a second in `held`, which sends
+    // the group there; a group thus goes there about once for each pixel's heavy segments
+    bool pending = false;
+    vec3 pending_segment;   // (s_front, s_back, length)
+    vec4 behind = vec4(0.0);
+    bool held = false;
+    vec3 held_segment;
     while (true) {          // the outer loop (its body is not indented)
 #endif
     while (!done && !left && steps < u_max_steps && stalled < MAX_STALLED) {
@@ -370,10 +377,9 @@ void PIXEL_MAIN() {
             if (found) break;
         }
         if (!found) break;
-        vec4 field = texelFetch(t_field, texelRow(3 * seg_cell), 0);
-        vec3 centre = texelFetch(t_field, texelRow(3 * seg_cell + 1), 0).xyz;
-        vec2 range = texelFetch(t_field, texelRow(3 * seg_cell + 2), 0).xy;
-        float at_eye = field.w + dot(field.xyz, u_eye - centre);
+        vec4 field = texelFetch(t_field, texelRow(2 * seg_cell), 0);
+        vec2 range = texelFetch(t_field, texelRow(2 * seg_cell + 1), 0).xy;
+        float at_eye = field.w + dot(field.xyz, u_eye);
         float rate = dot(field.xyz, dir);
         float s_at_start = at_eye + dot(field.xyz, offset);
         float s_front = clamp(s_at_start + a * rate, range.x, range.y);
@@ -405,8 +411,13 @@ void PIXEL_MAIN() {
         bool light;
         vec4 seg = lightSegment(s_front, s_back, b - a, light);
         if (!light) {
-            pending = true;
-            pending_segment = vec3(s_front, s_back, b - a);
+            if (pending) {
+                held = true;
+                held_segment = vec3(s_front, s_back, b - a);
+            } else {
+                pending = true;
+                pending_segment = vec3(s_front, s_back, b - a);
+            }
             seg = vec4(0.0);
         }
     #else
@@ -416,29 +427,30 @@ void PIXEL_MAIN() {
   #if OPTICAL_MODEL == 2
         seg.a = 0.0;          // emission only: colours add, nothing absorbs
   #endif
+  #if WALK_LIGHT
+        if (pending) {                           // behind the pending segment
+            behind += (1.0 - behind.a) * seg;
+        } else {
+            acc += (1.0 - acc.a) * seg;
+        }
+        if (acc.a + (1.0 - acc.a) * behind.a >= ERT_ALPHA) done = true;   // the pending one adds more
+  #else
         acc += (1.0 - acc.a) * seg;              // front to back: the segment under what is in front
         if (acc.a >= ERT_ALPHA) done = true;
+  #endif
 #endif
 #if WALK_FOLDS
         if (rare != 0) break;
 #endif
 #if WALK_LIGHT
   #ifdef GL_ARB_shader_group_vote
-        if (anyInvocationARB(pending)) break;   // the whole group to the outer loop
+        if (anyInvocationARB(held)) break;      // the whole group to the outer loop
   #else
-        if (pending) break;
+        if (held) break;
   #endif
 #endif
     }
 #if WALK_OUTER
-#if WALK_LIGHT
-    if (pending) {
-        vec4 seg = linearSegment(pending_segment.x, pending_segment.y, pending_segment.z);
-        acc += (1.0 - acc.a) * seg;
-        if (acc.a >= ERT_ALPHA) done = true;
-        pending = false;
-    }
-#endif
 #if WALK_FLAT || WALK_FOLDS
     if (rare != 0 && !done) {
         int next = -1;
@@ -461,6 +473,21 @@ void PIXEL_MAIN() {
         }
     }
     rare = 0;
+#endif
+#if WALK_LIGHT
+    // the pending segment, then what gathered behind it, where a second waits or the ray
+    // ends (a ray that ends holding a second adds it too, in a second round)
+    bool ending = done || left || steps >= u_max_steps || stalled >= MAX_STALLED;
+    while (pending && (held || ending)) {
+        vec4 seg = linearSegment(pending_segment.x, pending_segment.y, pending_segment.z);
+        acc += (1.0 - acc.a) * seg;
+        acc += (1.0 - acc.a) * behind;
+        behind = vec4(0.0);
+        pending = held;
+        pending_segment = held_segment;
+        held = false;
+        if (acc.a >= ERT_ALPHA) done = true;
+    }
 #endif
     if (done || left || steps >= u_max_steps || stalled >= MAX_STALLED) break;
     }
