@@ -446,13 +446,18 @@ def draw(renderer, plan, data, texture):
             ctx.depth_func = "<"
         if compute or in_place:
             ctx.memory_barrier()        # the images' stores, before the next pass reads them
+        alive = None
         if in_place and layer < MAX_PASSES and reentry is not None:
             if first_from_eye:          # every pixel walked: as if each had an entry
                 targets.entry_t_fbo.use()
                 targets.entry_t_fbo.clear(0.0, 0.0, 0.0, 0.0)
-            mark_alive(ctx, targets, marker, layer, targets.state[src], queries[MAX_PASSES])
+            # counted where the next layer's entries would be: none alive, no next layer
+            alive = mark_alive(ctx, targets, marker, layer, targets.state[src], queries[MAX_PASSES],
+                               layer + 1 >= counted_from)
         src = dst
         plan.walk_passes += 1
+        if in_place and alive == 0:
+            break
     # the layers with entries (their counts are ready: a later layer's count was waited for)
     walk.layers_drawn = 1 if reentry is None else sum(1 for q in entered if q is None or q.samples > 0)
     ctx.disable(ctx.BLEND)

@@ -215,12 +215,13 @@ def mark(ctx, targets, marker, layer, query, count, depth=None, state=None):
     return query.samples if count else None
 
 
-def mark_alive(ctx, targets, marker, layer, state, query):
+def mark_alive(ctx, targets, marker, layer, state, query, count):
     """After the walk of ``layer`` in place: the pixels it walked whose ray left the mesh
     without ending, marked at ``alive_depth(layer)``, so that the next layer's first entry
-    draw shades only them (``entries``, ``alive_marks``). Not counted."""
+    draw shades only them (``entries``, ``alive_marks``). Returns their count with
+    ``count`` (0: no later layer can have an entry), else None."""
     try:
-        mark(ctx, targets, marker, layer, query, False, alive_depth(layer), state)
+        return mark(ctx, targets, marker, layer, query, count, alive_depth(layer), state)
     finally:
         ctx.disable(ctx.DEPTH_TEST)
         ctx.depth_func = "<"
