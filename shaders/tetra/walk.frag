@@ -476,7 +476,9 @@ void PIXEL_MAIN() {
 #endif
 #if WALK_LIGHT
     // the pending segment, then what gathered behind it, where a second waits or the ray
-    // ends (a ray that ends holding a second adds it too, in a second round)
+    // ends (a ray that ends holding a second adds it too, in a second round). Not every
+    // pending segment of the group: when a pixel adds its own would then depend on its
+    // neighbours, and so would its last bits (a tile's pixels would differ from the image's)
     bool ending = done || left || steps >= u_max_steps || stalled >= MAX_STALLED;
     while (pending && (held || ending)) {
         vec4 seg = linearSegment(pending_segment.x, pending_segment.y, pending_segment.z);
