@@ -291,9 +291,15 @@ void PIXEL_MAIN() {
     // With lanes in lockstep, the segments that are not light wait for the outer loop: the
     // first in `pending`, while the light ones behind it gather in `behind` (front to back;
     // compositing is associative, so they join it there), a second in `held`, which sends
-    // the group there; a group thus goes there about once for each pixel's heavy segments
+    // the group there. There every pending segment of the group is integrated (the group
+    // is there for one pixel's: the others' take no longer), and a pixel whose pending one
+    // is integrated adds it where its next comes, in the stepping loop. Each pixel adds
+    // its segments in the same order and at the same points whoever's integral took the
+    // group to the outer loop, so its last bits do not depend on its neighbours.
     bool pending = false;
     vec3 pending_segment;   // (s_front, s_back, length)
+    bool integrated = false;
+    vec4 pending_rgba;      // its integral, once integrated
     vec4 behind = vec4(0.0);
     bool held = false;
     vec3 held_segment;
@@ -411,11 +417,17 @@ void PIXEL_MAIN() {
         bool light;
         vec4 seg = lightSegment(s_front, s_back, b - a, light);
         if (!light) {
-            if (pending) {
+            if (pending && !integrated) {
                 held = true;
                 held_segment = vec3(s_front, s_back, b - a);
             } else {
+                if (pending) {                   // the last one, integrated: added now
+                    acc += (1.0 - acc.a) * pending_rgba;
+                    acc += (1.0 - acc.a) * behind;
+                    behind = vec4(0.0);
+                }
                 pending = true;
+                integrated = false;
                 pending_segment = vec3(s_front, s_back, b - a);
             }
             seg = vec4(0.0);
@@ -475,19 +487,25 @@ void PIXEL_MAIN() {
     rare = 0;
 #endif
 #if WALK_LIGHT
-    // the pending segment, then what gathered behind it, where a second waits or the ray
-    // ends (a ray that ends holding a second adds it too, in a second round). Not every
-    // pending segment of the group: when a pixel adds its own would then depend on its
-    // neighbours, and so would its last bits (a tile's pixels would differ from the image's)
+    // every pending segment not yet integrated; added, with what gathered behind it, where
+    // a second waits or the ray ends (a ray that ends holding a second: in a second round)
     bool ending = done || left || steps >= u_max_steps || stalled >= MAX_STALLED;
-    while (pending && (held || ending)) {
-        vec4 seg = linearSegment(pending_segment.x, pending_segment.y, pending_segment.z);
-        acc += (1.0 - acc.a) * seg;
-        acc += (1.0 - acc.a) * behind;
-        behind = vec4(0.0);
-        pending = held;
-        pending_segment = held_segment;
-        held = false;
+    bool first = true;
+    while (pending && ((first && (!integrated || held)) || ending)) {
+        first = false;
+        if (!integrated) {
+            pending_rgba = linearSegment(pending_segment.x, pending_segment.y, pending_segment.z);
+            integrated = true;
+        }
+        if (held || ending) {
+            acc += (1.0 - acc.a) * pending_rgba;
+            acc += (1.0 - acc.a) * behind;
+            behind = vec4(0.0);
+            pending = held;
+            integrated = false;
+            pending_segment = held_segment;
+            held = false;
+        }
         if (acc.a >= ERT_ALPHA) done = true;
     }
 #endif
