@@ -259,6 +259,13 @@ vec4 linearSegmentCued(float s_front, float s_back, float len, float q_front, fl
     return vec4(color, alpha_acc);
 }
 
+// exp(x) - 1 by the first `terms` terms of its series (x >= 0; a constant count: unrolled)
+float expm1Short(float x, int terms) {
+    float p = 1.0;
+    for (int k = terms; k >= 2; k--) p = 1.0 + x * (1.0 / float(k)) * p;
+    return x * p;
+}
+
 // The common segment, light: each of its pieces (cut at the knots) of optical depth and
 // relative change of transparency at most 0.3, and none reaching opacity 1. Integrated as
 // linearSegment does, but each piece by 4 Gauss-Legendre points (linearSegment takes 2 to
@@ -295,12 +302,15 @@ vec4 lightSegment(float s_front, float s_back, float len, out bool light) {
         float od = lu * (nlw - meanLog1pSeries(r, 12));
         bool adds = l > 0.0 && (aa > 0.0 || ab > 0.0);
         light = light && (!adds || (wb > 0.0 && od <= 0.3 && abs(r) <= 0.3));
-        float mean = 0.0;                   // the mean of T(f) - T(1) over the piece
-        for (int i = 5; i < 9; ++i) {       // (unrolled: a constant count)
-            float od_to = lu * GL_X[i] * (nlw - meanLog1pSeries(r * GL_X[i], 12));
-            mean += GL_W[i] * exp(-od_to) * -expm1Series(-max(od - od_to, 0.0));
-        }
         float A = adds ? -expm1Series(-od) : 0.0;
+        // the mean of T(f) - T(1) = T(1) (exp(od - od(f)) - 1) over the piece: no exponential
+        // per point, and each point's series only as long as its arguments need for 1e-9
+        // (|r f| <= 0.3 f; od - od(f) at most 1.0, 0.9, 0.57, 0.14 of od <= 0.3)
+        float mean = GL_W[5] * expm1Short(max(od - lu * GL_X[5] * (nlw - meanLog1pSeries(r * GL_X[5], 4)), 0.0), 8)
+                   + GL_W[6] * expm1Short(max(od - lu * GL_X[6] * (nlw - meanLog1pSeries(r * GL_X[6], 7)), 0.0), 7)
+                   + GL_W[7] * expm1Short(max(od - lu * GL_X[7] * (nlw - meanLog1pSeries(r * GL_X[7], 10)), 0.0), 6)
+                   + GL_W[8] * expm1Short(max(od - lu * GL_X[8] * (nlw - meanLog1pSeries(r * GL_X[8], 12)), 0.0), 4);
+        mean *= 1.0 - A;
         float weight = 1.0 - alpha_acc;
         color += adds ? weight * (ca * A + (cb - ca) * mean) : vec3(0.0);
         alpha_acc += weight * A;
