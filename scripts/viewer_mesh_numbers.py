@@ -153,7 +153,7 @@ def main(argv=None):
             drive = Drive(v)
             for sort in sorts:
                 use_sort(v, sort)
-                label = v.options.get("sort", "default") if sort else f"default ({v.render_arguments()[3].get('sort', 'mpvo')})"
+                label = v.options.get("sort", "default") if sort else f"default ({v.render_arguments()[3].get('sort', 'auto')})"
                 first = drive.reset_and_still()
                 log(f"{label}, tolerance {tolerance}: first frames {[f'{s:.2f} s {q}' for s, q, _ in first]}")
                 moving, still = drive.turn(args.steps, args.pixels, on_frame=lambda k, f: log(
