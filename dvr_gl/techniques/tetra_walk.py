@@ -50,8 +50,8 @@ Per view, the CPU uploads a camera; then, per layer of depth peeling:
    not (``capabilities.lockstep_lanes``), so in the stepping loop that code cost every
    step (15-25 % of the frame on the NASA meshes). Where lanes run in lockstep, the
    light segments are integrated inline by a straight-line rule and the others in that
-   outer loop. ``segments="table"``: the
-   approximate integral of ``model.segment_table``.
+   outer loop (a pixel's first waiting while it walks on, ``walk.frag``).
+   ``segments="table"``: the approximate integral of ``model.segment_table``.
 3. resolve: the accumulation into the image's target (composite, with the surface
    behind it) or classified (mip, minip, average: ``tetra_classify.frag``).
 
@@ -255,7 +255,8 @@ def walked_cells(mesh, visible):
 
 class WalkTextures:
     """The walk's data beyond tetra's, per mesh and set of walked cells: the face
-    neighbours (RGBA32I texture, one texel per cell) and the boundary faces (a vertex buffer)."""
+    neighbours (RGBA32I texture, one texel per cell; ``HULL`` across hull faces), the
+    boundary faces (a vertex buffer) and those off the convex hull (an index buffer)."""
 
     def __init__(self, ctx, mesh, texture, walked=None):
         self.neighbours = texture(ctx, neighbours(mesh, walked, hull=True), "i4")
@@ -266,7 +267,7 @@ class WalkTextures:
         self.reentry_vertices = len(reentry)
         self.reentry = ctx.buffer(reentry.tobytes()) if len(reentry) else None
         self.vaos = {}
-        self.layers_drawn = 0       # layers the last draw walked (draw: drawn without waiting)
+        self.layers_drawn = 0       # layers the last draw found entries in (draw: drawn without waiting)
 
     def vao(self, ctx, prog, reentry=False):
         """(vertex array, vertices): the boundary faces, or (``reentry``) those that are
@@ -401,8 +402,8 @@ def draw(renderer, plan, data, texture):
             query = queries[layer]
             entered.append(query)
             if layer == 0 and pick_prog is not None and start_vao is None:
-                found = first_entries(ctx, pick_prog, walk.vao(ctx, pick_prog), data, flags, targets, src, query, count, marker,
-                                      depth_scale(scene))
+                found = first_entries(ctx, pick_prog, walk.vao(ctx, pick_prog), data, flags, targets, src, query,
+                                      count, marker, depth_scale(scene))
             else:
                 found = entries(ctx, entry_prog, faces if layer == 0 else reentry, data, flags, targets, src,
                                 query, start_vao if starting else None, count, layer, marker, in_place)

@@ -65,8 +65,9 @@ class WalkTargets:
         self.entry_pick_fbo = ctx.framebuffer([self.entry_t, self.entry_cell], self.marks)   # (DEPTH_PICK)
 
     def release(self):
-        for fbo in (*self.layers, self.in_place, *self.acc_only, *self.state_only, self.entry_t_fbo, self.entry_marked_fbo,
-                    self.entry_cell_fbo, self.entry_cell_marked_fbo, self.entry_pick_fbo, self.marks_fbo):
+        for fbo in (*self.layers, self.in_place, *self.acc_only, *self.state_only, self.entry_t_fbo,
+                    self.entry_marked_fbo, self.entry_cell_fbo, self.entry_cell_marked_fbo, self.entry_pick_fbo,
+                    self.marks_fbo):
             fbo.release()
         self.marks.release()
         for t in (*self.acc, *self.state, self.entry_t, self.entry_cell):
