@@ -415,13 +415,13 @@ def draw(renderer, plan, data, texture):
         dst = src if in_place else 1 - src
         (targets.in_place if in_place else targets.layers[dst]).use()
         textures = {"t_planes": data.planes, "t_field": data.field, "t_neighbours": walk.neighbours, "t_flags": flags,
-                    "t_tets": data.tets, "t_points": data.points,
-                    "t_acc": targets.acc[src], "t_state": targets.state[src], "t_entry_t": targets.entry_t,
+                    "t_tets": data.tets, "t_points": data.points, "t_entry_t": targets.entry_t,
                     "t_entry_cell": targets.entry_cell, **extra_textures}
         if surfaces is not None:
             textures["t_surface"] = surfaces
-        if in_place:        # the images are read and written; no sampler reads them
-            del textures["t_acc"], textures["t_state"]
+        if not in_place:    # in place the images are read and written; no sampler reads them
+            textures.update(t_acc=targets.acc[src], t_state=targets.state[src])
+        else:
             targets.acc[src].bind_to_image(0, read=True, write=True)
             targets.state[src].bind_to_image(1, read=True, write=True)
         bind(walk_prog, textures, {**walk_uniforms, "u_start_cell": start if first_from_eye else -1,

@@ -45,6 +45,14 @@ float expm1Series(float x) {
     return x * p;
 }
 
+// The same series to x^terms / terms! (x >= 0, a constant count: the loop unrolls), for
+// callers that know their argument's bound (common/linear_segment.glsl's lightSegment).
+float expm1Short(float x, int terms) {
+    float p = 1.0;
+    for (int k = terms; k >= 2; k--) p = 1.0 + x * (1.0 / float(k)) * p;
+    return x * p;
+}
+
 float expm1Accurate(float x) {
     if (abs(x) > 0.5) return exp(x) - 1.0;
     return expm1Series(x);

@@ -259,13 +259,6 @@ vec4 linearSegmentCued(float s_front, float s_back, float len, float q_front, fl
     return vec4(color, alpha_acc);
 }
 
-// exp(x) - 1 by the first `terms` terms of its series (x >= 0; a constant count: unrolled)
-float expm1Short(float x, int terms) {
-    float p = 1.0;
-    for (int k = terms; k >= 2; k--) p = 1.0 + x * (1.0 / float(k)) * p;
-    return x * p;
-}
-
 // The common segment, light: each of its pieces (cut at the knots) of optical depth and
 // relative change of transparency at most 0.3, and none reaching opacity 1. Integrated as
 // linearSegment does, but each piece by 4 Gauss-Legendre points (linearSegment takes 2 to

@@ -233,6 +233,13 @@ int flatExit(int cell, vec3 x, vec3 dir, ivec4 nb, int prev) {
     return pick;
 }
 
+// Lockstep lanes: a pending segment's integral, then what gathered behind it, under `acc`
+void addPending(inout vec4 acc, vec4 pending_rgba, inout vec4 behind) {
+    acc += (1.0 - acc.a) * pending_rgba;
+    acc += (1.0 - acc.a) * behind;
+    behind = vec4(0.0);
+}
+
 void PIXEL_MAIN() {
     ivec2 px = ivec2(FRAG_COORD.xy);
 #if IN_PLACE
@@ -421,11 +428,7 @@ void PIXEL_MAIN() {
                 held = true;
                 held_segment = vec3(s_front, s_back, b - a);
             } else {
-                if (pending) {                   // the last one, integrated: added now
-                    acc += (1.0 - acc.a) * pending_rgba;
-                    acc += (1.0 - acc.a) * behind;
-                    behind = vec4(0.0);
-                }
+                if (pending) addPending(acc, pending_rgba, behind);   // the last one, integrated: added now
                 pending = true;
                 integrated = false;
                 pending_segment = vec3(s_front, s_back, b - a);
@@ -498,9 +501,7 @@ void PIXEL_MAIN() {
             integrated = true;
         }
         if (held || ending) {
-            acc += (1.0 - acc.a) * pending_rgba;
-            acc += (1.0 - acc.a) * behind;
-            behind = vec4(0.0);
+            addPending(acc, pending_rgba, behind);
             pending = held;
             integrated = false;
             pending_segment = held_segment;
