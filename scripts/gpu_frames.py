@@ -5,7 +5,10 @@ SIZE x SIZE with a new view each frame and the image read back (medians, after a
 GPU time of one draw from a timer query). Writes JSON to --out and the 96x96 walk images
 beside it (for RMSE against exact, which this script does not compute).
 
-    DVR_GL_DATA=../shared/data python scripts/gpu_frames.py [--size 1024] [--out gpu_frames.json]
+    DVR_GL_DATA=../shared/data python scripts/gpu_frames.py [--size 1024] [--out gpu_frames.json] [--walk-only]
+
+The walk is also timed in the other stage and, where the GL's lanes are not found in
+lockstep, built as for lanes in lockstep (``LOCKSTEP_LANES``), each with its images.
 """
 
 import argparse
@@ -52,31 +55,56 @@ def median_ms(fn, args, warm=4):
     return round(1000 * float(np.median(times)), 2)
 
 
+def walk_rows(r, size, out, name, mesh, tf, cams, stage, lockstep):
+    """The cell walk on one mesh in ``stage`` ("auto": the renderer's choice), built with
+    ``LOCKSTEP_LANES`` ``lockstep`` (None: the GL's own): exact segments, and table ones
+    for the default way; the 96x96 images saved beside ``out``."""
+    rows = []
+    tetra = get_technique("tetra")
+    default = stage == "auto" and lockstep is None
+    for segments in ("exact", "table") if default else ("exact",):
+        scenes = [dvr_gl.Scene(mesh, tf, c, size, size) for c in cams]
+        frame = median_ms(lambda s: r.render(s, "tetra", segments=segments, stage=stage), scenes)
+        plan = tetra.make_plan(scenes[0], None, tables=r.tables, segments=segments, stage=stage)
+        small = dvr_gl.Scene(mesh, tf, cams[0], 96, 96)
+        label = segments + ("" if default else f"_{stage}" + ("" if lockstep is None else f"_lockstep{lockstep}"))
+        np.save(out.with_name(f"walk96_{name}_{label}.npy"),
+                r.render(small, "tetra", segments=segments, stage=stage))
+        with current(r.ctx):
+            rows.append(dict(mesh=name, segments=segments, stage=stage, lockstep=lockstep, size=size, frame_ms=frame,
+                             draw_gpu_ms=gpu_ms(r.ctx, lambda: tetra.draw(r, plan), 5)))
+        print(rows[-1], flush=True)
+    return rows
+
+
 def main():
     parser = argparse.ArgumentParser()
     parser.add_argument("--size", type=int, default=1024)
     parser.add_argument("--out", default="gpu_frames.json")
+    parser.add_argument("--walk-only", action="store_true", help="only the cell walk's rows (a shorter run)")
     args = parser.parse_args()
     size, out = args.size, Path(args.out)
     results = {}
-    with dvr_gl.Renderer() as r, current(r.ctx):
+    # the walk's other ways, measured beside the default: the other stage, and the walk
+    # built for lanes in lockstep (light segments inline, the rest in the outer loop)
+    lockstep = dvr_gl.Renderer()
+    lockstep.programs.context_defines["LOCKSTEP_LANES"] = 1
+    with dvr_gl.Renderer() as r, lockstep, current(r.ctx):
         ctx = r.ctx
         results["renderer"] = [ctx.info["GL_RENDERER"], r.compute_stage_faster]
         print(results["renderer"], flush=True)
+        other_stage = "fragment" if r.compute_stage_faster else "compute"
         rows = results["walk"] = []
         for name in ("bluntfin", "combustor", "loxpost"):
             mesh, tf = load_mesh_dataset(name)
             cams = [dvr_gl.default_camera(mesh, azimuth=30 + 7 * k, elevation=20) for k in range(29)]
-            for segments in ("exact", "table"):
-                scenes = [dvr_gl.Scene(mesh, tf, c, size, size) for c in cams]
-                frame = median_ms(lambda s: r.render(s, "tetra", segments=segments), scenes)
-                tetra = get_technique("tetra")
-                plan = tetra.make_plan(scenes[0], None, tables=r.tables, segments=segments)
-                small = dvr_gl.Scene(mesh, tf, cams[0], 96, 96)
-                np.save(out.with_name(f"walk96_{name}_{segments}.npy"), r.render(small, "tetra", segments=segments))
-                rows.append(dict(mesh=name, segments=segments, size=size, frame_ms=frame,
-                                 draw_gpu_ms=gpu_ms(ctx, lambda: tetra.draw(r, plan), 5)))
-                print(rows[-1], flush=True)
+            rows += walk_rows(r, size, out, name, mesh, tf, cams, "auto", None)
+            rows += walk_rows(r, size, out, name, mesh, tf, cams, other_stage, None)
+            if not r.programs.context_defines["LOCKSTEP_LANES"]:
+                rows += walk_rows(lockstep, size, out, name, mesh, tf, cams, "auto", 1)
+        if args.walk_only:
+            write_json(out, results)
+            return
         rows = results["layers"] = []
         for name, make in (("head+field", head_and_field), ("channels", channels_scene)):
             scene = make(size, "mix")
@@ -94,6 +122,10 @@ def main():
             rows.append(dict(data=name, size=size, frame_ms=median_ms(lambda s: r.render(s, step=step), scenes),
                              gpu_ms=gpu_ms(ctx, lambda: raycast.draw(r, plan))))
             print(rows[-1], flush=True)
+    write_json(out, results)
+
+
+def write_json(out, results):
     partial = out.with_name(out.name + ".partial")
     partial.write_text(json.dumps(results, indent=1))
     os.replace(partial, out)

@@ -49,16 +49,19 @@ def open_mesh_viewer(mesh, tf, size, tolerance, name):
 
 
 def use_sort(v, sort):
-    """Key c until the viewer's cell order is ``sort`` (None: tetra's default)."""
+    """Key c until the viewer's cell order is ``sort`` (None: back to tetra's default,
+    the order no key has chosen)."""
     from dvr_gl.frontends.viewer import PRESS, key_code
     from dvr_gl.techniques import get_technique
-    sorts = get_technique("tetra").SORTS
-    wanted = sort or sorts[0]
-    for _ in range(len(sorts)):
-        if v.options.get("sort", sorts[0]) == wanted:
+    if sort is None:
+        if "sort" in v.options:
+            v.try_change(lambda: v.options.pop("sort"), "use the default sort")
+        return
+    for _ in range(len(get_technique("tetra").SORTS) + 1):
+        if v.options.get("sort") == sort:
             return
         v.on_key(key_code("c"), PRESS)
-    raise RuntimeError(f"key c never reached sort {wanted!r} ({v.messages[-1]})")
+    raise RuntimeError(f"key c never reached sort {sort!r} ({v.messages[-1]})")
 
 
 class Drive:

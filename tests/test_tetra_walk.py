@@ -31,9 +31,9 @@ from dvr_gl.gl.context import current
 from test_tetra import CUBE, FIVE, GL_TOL, SIX, TF, VIEWS, blocks_mesh, closed_form_boxes, cube_mesh, _lattice_mesh
 
 
-def walk(renderer, scene):
+def walk(renderer, scene, stage="auto"):
     """(image, plan) of one walk render, with the plan's pass counts."""
-    plan = tetra.make_plan(scene, sort="walk", tables=renderer.tables)
+    plan = tetra.make_plan(scene, sort="walk", stage=stage, tables=renderer.tables)
     with current(renderer.ctx):
         fbo = tetra.draw(renderer, plan)
         image = renderer.read_target(fbo, scene.width, scene.height)

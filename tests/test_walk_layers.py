@@ -12,6 +12,7 @@ from dvr_gl.data import delaunay_ball
 from dvr_gl.gl.context import current
 from dvr_gl.model import mesh as M
 from dvr_gl.techniques import tetra_walk
+from dvr_gl.techniques.walk_entries import entries, first_entries
 
 from test_tetra import TF, blocks_mesh, cube_mesh, FIVE
 from test_tetra_walk import _ball, _bluntfin, walk
@@ -81,7 +82,10 @@ def test_the_walk_in_place_is_the_walk_in_turn(monkeypatch):
     """The fragment stage's walk in place (image load/store, only the pixels with an
     entry shaded) and in two targets used in turn: the same images bit for bit and the
     same cells visited, pixel by pixel, over meshes of one layer and of several, mip,
-    the eye inside the mesh, orthographic rays that start inside it, the blunt fin."""
+    the eye inside the mesh, orthographic rays that start inside it, the blunt fin. The
+    compute stage (its first layer's entries by the depth test, later layers' entry
+    draws only where a ray goes on, the peeling ended by the count of those) too, and
+    in as many layers as in place, where the GL has it (llvmpipe: bit for bit)."""
     ball = delaunay_ball()
     lo, hi = ball.bounds
     centre = (lo + hi) / 2
@@ -91,20 +95,28 @@ def test_the_walk_in_place_is_the_walk_in_turn(monkeypatch):
               _ball(size=40).replace(camera=Camera(centre, centre + [0, 0, -5.0], fov=60)),
               _ball(size=40).replace(camera=Camera(centre, centre + [0, 0, -5.0], ortho_height=60.0)),
               Scene(mesh, tf, dvr_gl.default_camera(mesh, azimuth=30, elevation=20), 48, 48)]
+    draws = []          # the entry passes drawn: (way, layer; "pick": the first layer's in one draw)
+    monkeypatch.setattr(tetra_walk, "first_entries", lambda *a: draws.append((way, "pick")) or first_entries(*a))
+    monkeypatch.setattr(tetra_walk, "entries", lambda *a: draws.append((way, a[10])) or entries(*a))
     results = {}
-    for in_place in (True, False):
-        monkeypatch.setattr(tetra_walk, "IN_PLACE", in_place)
+    with dvr_gl.Renderer() as renderer, current(renderer.ctx):
+        compute = renderer.ctx.version_code >= 430 and "llvmpipe" in renderer.ctx.info["GL_RENDERER"]
+    for way in ("in place", "in turn", "compute") if compute else ("in place", "in turn"):
+        monkeypatch.setattr(tetra_walk, "IN_PLACE", way == "in place")
         with dvr_gl.Renderer() as renderer:
-            results[in_place] = []
+            results[way] = []
             for scene in scenes:
-                img, plan = walk(renderer, scene)
-                results[in_place].append((img, tetra_walk.walk_counts(renderer, plan)[0], plan.walk_passes))
+                img, plan = walk(renderer, scene, "compute" if way == "compute" else "fragment")
+                results[way].append((img, tetra_walk.walk_counts(renderer, plan)[0], plan.walk_passes))
     layers = set()
-    for (a, steps_a, passes_a), (b, steps_b, passes_b) in zip(results[True], results[False]):
-        assert a[..., 3].max() > 0.2
-        assert np.array_equal(a, b) and np.array_equal(steps_a, steps_b) and passes_a == passes_b
-        layers.add(passes_a)
+    for way in results:
+        for (a, steps_a, passes_a), (b, steps_b, passes_b) in zip(results["in place"], results[way]):
+            assert a[..., 3].max() > 0.2
+            assert np.array_equal(a, b) and np.array_equal(steps_a, steps_b) and passes_a == passes_b
+            layers.add(passes_a)
     assert max(layers) >= 2
+    if compute:         # no more entry passes than in place: none after the last ray left
+        assert [d for w, d in draws if w == "compute"] == [d for w, d in draws if w == "in place"]
 
 
 def test_a_frame_draws_the_layers_the_last_one_had_entries_in(renderer):

@@ -31,6 +31,7 @@ from test_tetra import SIX, TF, VIEWS, cube_mesh
 from test_tetra_walk import _bluntfin, walk
 
 LIGHT_TOL = 2e-6
+ERT_ALPHA = 1.0 - 2.0 ** -20     # walk.frag's
 
 RAMP = TransferFunction([(0.0, 0.1, 0.2, 0.9), (0.5, 0.2, 0.9, 0.3), (1.0, 0.9, 0.2, 0.1)],
                         [(0.0, 0.0), (0.4, 0.2), (0.6, 0.7), (1.0, 0.3)], unit_distance=0.25)
@@ -45,6 +46,11 @@ OPAQUE = TransferFunction([(0.0, 0.3, 0.3, 0.9), (1.0, 0.9, 0.3, 0.3)], [(0.0, 0
 # ones (each waits in the outer loop's pending slot, a second in its held one)
 STEEP = TransferFunction([(0.0, 0.2, 0.4, 0.9), (1.0, 0.9, 0.5, 0.1)],
                          [(0.0, 0.02), (0.45, 0.05), (0.5, 0.95), (0.55, 0.05), (1.0, 0.3)], unit_distance=0.3)
+
+# steep, nearly opaque bands in a dense field: rays that turn opaque with segments waiting
+DENSE_STEEP = TransferFunction([(0.0, 0.2, 0.4, 0.9), (1.0, 0.9, 0.5, 0.1)],
+                               [(0.0, 0.3), (0.3, 0.35), (0.33, 0.98), (0.36, 0.35), (0.6, 0.4), (0.63, 0.99),
+                                (0.66, 0.4), (1.0, 0.5)], unit_distance=0.05)
 
 
 def _light_segments(renderer, tf, sf, sb, length):
@@ -163,3 +169,25 @@ def test_lockstep_walk_on_the_blunt_fin(lockstep_renderers):
     b = walk(lockstep_renderers[1], scene)[0]
     assert b[..., 3].max() > 0.2
     assert np.abs(a - b).max() < 2e-6
+
+
+@pytest.mark.parametrize("view", [(10, 40), (75, -15)])
+def test_a_pixel_does_not_depend_on_its_neighbours(view):
+    """With lanes in lockstep a group of pixels goes to the outer loop for one pixel's
+    segment, and the others' waiting segments are integrated there too; each pixel must
+    still add its segments in the same order and stop at the same one (turning opaque
+    with a segment waiting included). Tiles of 19 pixels (groups cut at other places) and
+    the compute stage (groups of another shape, llvmpipe: the same code) give the whole
+    render's pixels bit for bit; rays that turn opaque are many."""
+    ball = delaunay_ball()
+    scene = Scene(ball, DENSE_STEEP, dvr_gl.default_camera(ball, azimuth=view[0], elevation=view[1]), 48, 48)
+    with dvr_gl.Renderer() as whole, dvr_gl.Renderer(max_tile=19) as tiled:
+        for r in (whole, tiled):
+            r.programs.context_defines["LOCKSTEP_LANES"] = 1
+        img = whole.render(scene, "tetra", sort="walk", stage="fragment")
+        assert (img[..., 3] >= ERT_ALPHA - 1e-6).sum() > 300
+        assert np.array_equal(tiled.render(scene, "tetra", sort="walk", stage="fragment"), img)
+        with current(whole.ctx):
+            llvmpipe = "llvmpipe" in whole.ctx.info["GL_RENDERER"]
+        if llvmpipe:
+            assert np.array_equal(whole.render(scene, "tetra", sort="walk", stage="compute"), img)

@@ -40,11 +40,14 @@ Per view, the CPU uploads a camera; then, per layer of depth peeling:
    it: ``HULL`` in the neighbours), as nothing is left to enter (81 % of the blunt fin's
    rays, 96 % of the LOX post's, under 1 % of the combustor's). In the fragment stage the
    walk reads and writes its accumulation and state in place (image load/store,
-   ``IN_PLACE``): a layer shades only the pixels that have an entry in it, and a
-   full-screen pass then marks those still going on (``walk_entries.mark_alive``), the
-   only ones the next layer's first entry draw shades. (Elsewhere two targets are used in
-   turn, and a layer's pass copies the pixels that ended in the last.) The code for
-   zero-volume cells and folded faces is compiled in only for meshes that have them
+   ``IN_PLACE``): a layer shades only the pixels that have an entry in it. The compute
+   stage writes its two targets in turn, every pixel (copying those without an entry).
+   Either way a full-screen pass then marks the pixels still going on
+   (``walk_entries.mark_alive``), the only ones the next layer's first entry draw shades;
+   their count, 0, ends the peeling without another entry pass. (Without image load/store
+   the fragment stage uses two targets in turn, and a layer's pass copies the pixels that
+   ended in the last.)
+   The code for zero-volume cells and folded faces is compiled in only for meshes that have them
    (``rare_paths``), and runs in an outer loop that a group of pixels enters only when
    one of them needs it: llvmpipe runs every branch's code for the whole group, taken or
    not (``capabilities.lockstep_lanes``), so in the stepping loop that code cost every
@@ -92,7 +95,9 @@ from .walk_entries import (MARK_GAP, StartFaces, WalkTargets, depth_scale, entri
 MAX_PASSES = 64            # layers of depth peeling (entries along one ray) at most
 HIDDEN_FRACTION = 0.5      # walk only the cells the TF shows where it hides this share (walked_cells)
 MAX_CELLS = 1 << 24        # cell numbers travel as float32 (MIN blending): exact below 2^24
-IN_PLACE = True            # the fragment stage's walk in place (False: two targets in turn, as the compute stage)
+IN_PLACE = True            # the fragment stage's walk in place (False: two targets in turn)
+
+
 class WalkUnsupported(ValueError):
     """A scene the cell walk does not render yet (the message says what to use)."""
 
@@ -332,12 +337,11 @@ def draw(renderer, plan, data, texture):
     compute = pixel_stage(renderer, plan.stage) == "compute"
     # the fragment stage's walk in place where the GL has image load/store (4.2)
     in_place = not compute and IN_PLACE and ctx.version_code >= 420
-    entry_prog = renderer.programs.get("tetra/walk_entry.vert", "tetra/walk_entry.frag",
-                                       dict(view, MARKED=0) if compute else view, geometry="tetra/walk_entry.geom")
-    # the first layer's entries in one draw (DEPTH_PICK), where its depth test is free: the
-    # fragment stage, no start faces, the eye outside the mesh
+    entry_prog = renderer.programs.get("tetra/walk_entry.vert", "tetra/walk_entry.frag", view,
+                                       geometry="tetra/walk_entry.geom")
+    # the first layer's entries in one draw (DEPTH_PICK) where no start faces are drawn
     pick_prog = None
-    if not compute and walk_entries.FIRST_LAYER_PICK:
+    if walk_entries.FIRST_LAYER_PICK:
         pick_prog = renderer.programs.get("tetra/walk_entry.vert", "tetra/walk_entry.frag", dict(view, DEPTH_PICK=1),
                                           geometry="tetra/walk_entry.geom")
     mark_prog = renderer.programs.get("tetra/walk_layer.vert", "tetra/walk_mark.frag")
@@ -382,8 +386,11 @@ def draw(renderer, plan, data, texture):
         targets.state_only[i].clear(0.0, -1.0, 0.0, 0.0)     # stopped at t = 0, no entry yet
     # every pixel walks in the first layer from the eye's cell
     targets.marks_fbo.clear(depth=layer_depth(0) if start >= 0 else 1.0)
-    # the marks serve the fragment stage's early depth test; a compute pass has none
-    marker = None if compute else (mark_prog, empty_vao(renderer, mark_prog))
+    # the marks: the entry passes' early depth test (both stages), and the fragment stage's walk's
+    marker = (mark_prog, empty_vao(renderer, mark_prog))
+    # after each walk, the pixels whose ray goes on are marked alive (their count ends the
+    # peeling), where the walk's state is an image written whole: in place or compute
+    marks_alive = in_place or compute
     src = 0
     # as many layers as the last frame found entries in are drawn without waiting for
     # their entry counts (a layer without entries leaves every pixel as it was): one wait
@@ -406,7 +413,7 @@ def draw(renderer, plan, data, texture):
                                       count, marker, depth_scale(scene))
             else:
                 found = entries(ctx, entry_prog, faces if layer == 0 else reentry, data, flags, targets, src,
-                                query, start_vao if starting else None, count, layer, marker, in_place)
+                                query, start_vao if starting else None, count, layer, marker, marks_alive)
             if found == 0 and count:
                 break
             if layer == MAX_PASSES:         # the cap: what is left is counted, not walked
@@ -448,16 +455,16 @@ def draw(renderer, plan, data, texture):
         if compute or in_place:
             ctx.memory_barrier()        # the images' stores, before the next pass reads them
         alive = None
-        if in_place and layer < MAX_PASSES and reentry is not None:
+        if marks_alive and layer < MAX_PASSES and reentry is not None:
             if first_from_eye:          # every pixel walked: as if each had an entry
                 targets.entry_t_fbo.use()
                 targets.entry_t_fbo.clear(0.0, 0.0, 0.0, 0.0)
             # counted where the next layer's entries would be: none alive, no next layer
-            alive = mark_alive(ctx, targets, marker, layer, targets.state[src], queries[MAX_PASSES],
+            alive = mark_alive(ctx, targets, marker, layer, targets.state[dst], queries[MAX_PASSES],
                                layer + 1 >= counted_from)
         src = dst
         plan.walk_passes += 1
-        if in_place and alive == 0:
+        if alive == 0:
             break
     # the layers with entries (their counts are ready: a later layer's count was waited for)
     walk.layers_drawn = 1 if reentry is None else sum(1 for q in entered if q is None or q.samples > 0)

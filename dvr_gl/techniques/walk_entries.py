@@ -125,14 +125,14 @@ class StartFaces:
 
 
 def entries(ctx, prog, faces, data, flags, targets, src, query, start=None, count=True, layer=0,
-             marker=None, alive_marks=False):
+            marker=None, alive_marks=False):
     """The entry pass of ``layer``: each pixel's nearest eligible entry (t, then the
     smallest cell at that t) into ``targets.entry_t`` and ``entry_cell``, and the pixels
     that have one marked at ``layer_depth(layer)`` in ``targets.marks`` (``marker``: the
-    marking program and its vertex array; None: no marks, for the compute stage's walk).
-    ``faces``: (vertex array, vertices) of the boundary faces. ``query`` counts the pixels
-    with an entry; ``count``: returns that count (0: none, and the second draw is then
-    not made; a count waits for the GPU), else None.
+    marking program and its vertex array). ``faces``: (vertex array, vertices) of the
+    boundary faces. ``query`` counts the pixels with an entry (the marking pass); ``count``:
+    returns that count (0: none, and the second draw is then not made; a count waits for
+    the GPU), else None.
     After the first layer both draws test the marks early (walk_entry.frag), so that only
     the pixels marked in the last layer (the first draw; ``alive_marks``: those marked
     alive by ``mark_alive``) or in this one (the second) are shaded. ``start``: (vertex
@@ -158,39 +158,27 @@ def entries(ctx, prog, faces, data, flags, targets, src, query, start=None, coun
     entry_blending()
     textures = {"t_planes": data.planes, "t_flags": flags, "t_state": targets.state[src],
                 "t_nearest": targets.entry_t}
-    masked = marker is not None
     try:
         targets.entry_t_fbo.use()
         targets.entry_t_fbo.clear(NO_ENTRY, NO_ENTRY, NO_ENTRY, NO_ENTRY)
-        if masked and layer > 0:
+        if layer > 0:
             depth_test(">=")      # the pixels marked in the last layer
-        (targets.entry_marked_fbo if masked else targets.entry_t_fbo).use()
+        targets.entry_marked_fbo.use()
         # t_nearest is not read in this draw; bound to a texture not drawn into
         last = (alive_depth if alive_marks else layer_depth)(layer - 1)
         bind(prog, dict(textures, t_nearest=targets.entry_cell),
              {"u_test_depth": last + MARK_GAP if layer > 0 else 0.5})
-        if masked:
-            render(False)
-            ctx.disable(ctx.BLEND)
-            if mark(ctx, targets, marker, layer, query, count) == 0:
-                return 0
-            entry_blending()
-        else:           # no marks: the first draw's kept fragments, 0 when no ray has an entry
-            with query:
-                render(False)
-            if count and query.samples == 0:
-                return 0
+        render(False)
+        ctx.disable(ctx.BLEND)
+        if mark(ctx, targets, marker, layer, query, count) == 0:
+            return 0
+        entry_blending()
         targets.entry_cell_fbo.use()
         targets.entry_cell_fbo.clear(NO_ENTRY, NO_ENTRY, NO_ENTRY, NO_ENTRY)
-        if masked:
-            depth_test(">=")          # the pixels just marked
-        (targets.entry_cell_marked_fbo if masked else targets.entry_cell_fbo).use()
+        depth_test(">=")          # the pixels just marked
+        targets.entry_cell_marked_fbo.use()
         bind(prog, textures, {"u_test_depth": layer_depth(layer) + MARK_GAP})
-        if count == "pixels" and not masked:
-            with query:               # the pixels left at the cap: the second draw's fragments
-                render(True)
-        else:
-            render(True)
+        render(True)
     finally:
         ctx.disable(ctx.BLEND | ctx.DEPTH_TEST)
         ctx.depth_func = "<"

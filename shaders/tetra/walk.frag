@@ -302,7 +302,9 @@ void PIXEL_MAIN() {
     // is there for one pixel's: the others' take no longer), and a pixel whose pending one
     // is integrated adds it where its next comes, in the stepping loop. Each pixel adds
     // its segments in the same order and at the same points whoever's integral took the
-    // group to the outer loop, so its last bits do not depend on its neighbours.
+    // group to the outer loop, so its last bits do not depend on its neighbours; where
+    // adding a pending one turns the ray opaque, the next one waiting is dropped, in
+    // either place (tests/test_walk_lockstep.py: tiles and the compute stage).
     bool pending = false;
     vec3 pending_segment;   // (s_front, s_back, length)
     bool integrated = false;
@@ -429,7 +431,10 @@ void PIXEL_MAIN() {
                 held_segment = vec3(s_front, s_back, b - a);
             } else {
                 if (pending) addPending(acc, pending_rgba, behind);   // the last one, integrated: added now
-                pending = true;
+                // opaque with it: this one is not added, as where the outer loop adds the last
+                bool opaque = acc.a >= ERT_ALPHA;
+                done = done || opaque;
+                pending = !opaque;
                 integrated = false;
                 pending_segment = vec3(s_front, s_back, b - a);
             }
@@ -502,12 +507,13 @@ void PIXEL_MAIN() {
         }
         if (held || ending) {
             addPending(acc, pending_rgba, behind);
-            pending = held;
+            bool opaque = acc.a >= ERT_ALPHA;
+            done = done || opaque;
+            pending = held && !opaque;   // opaque: a held one is not added (as in the stepping loop)
             integrated = false;
             pending_segment = held_segment;
             held = false;
         }
-        if (acc.a >= ERT_ALPHA) done = true;
     }
 #endif
     if (done || left || steps >= u_max_steps || stalled >= MAX_STALLED) break;

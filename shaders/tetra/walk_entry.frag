@@ -47,12 +47,9 @@ uniform float u_depth_scale;
 // The depth test before the shader, though it discards (it writes no depth): after the
 // first layer only the pixels marked (techniques/tetra_walk.py) are shaded. Without the
 // extension the same test comes after the shader: the same image, more fragments shaded.
-// Not where nothing is marked (the compute stage's walk): an occlusion query then counts
-// this pass's fragments, and early tests would count the discarded ones too.
-#ifndef MARKED
-#define MARKED 1
-#endif
-#if MARKED && !DEPTH_PICK && defined(GL_ARB_shader_image_load_store)
+// No occlusion query counts this pass's fragments (early tests would count the discarded
+// ones too): the marking pass after it counts the pixels with an entry.
+#if !DEPTH_PICK && defined(GL_ARB_shader_image_load_store)
 layout(early_fragment_tests) in;
 #endif
 
