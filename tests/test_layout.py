@@ -218,3 +218,14 @@ def test_old_import_paths_still_work_with_a_warning(old):
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         importlib.import_module(new)               # the new path is quiet
+
+
+def test_every_package_directory_is_listed_for_the_build():
+    """pyproject.toml names every directory of Python modules and of shaders as a package
+    (setuptools warns of, and may one day drop, a directory of package data it was not
+    told of)."""
+    tomllib = pytest.importorskip("tomllib")     # Python 3.11
+    listed = set(tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"])
+    found = {"dvr_gl.shaders"} | {f"dvr_gl.shaders.{d.name}" for d in (ROOT / "shaders").iterdir() if d.is_dir()}
+    found |= {".".join(p.parent.relative_to(ROOT).parts) for p in PACKAGE.rglob("__init__.py")}
+    assert listed == found
