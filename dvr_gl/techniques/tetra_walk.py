@@ -12,7 +12,8 @@ triangles (``WalkTextures``) and per-cell flags (shown, zero volume, folded face
 Per view, the CPU uploads a camera; then, per layer of depth peeling:
 
 1. entry pass (``walk_entries``, ``walk_entry.vert/.geom/.frag``): the boundary faces are
-   drawn twice, each as its grown bounding box in window coordinates (so coverage is the
+   drawn twice, each as its triangle grown in window coordinates (or its grown bounding
+   box, where a corner is too sharp to grow; so coverage is the
    fragment's test, not rasterisation's: a face seen edge-on keeps its pixels), each fragment
    finding where its pixel's ray crosses the face's plane going in, inside the face's
    triangle; the first draw keeps the nearest such t beyond where the pixel's last walk
