@@ -41,13 +41,12 @@ Per view, the CPU uploads a camera; then, per layer of depth peeling:
    it: ``HULL`` in the neighbours), as nothing is left to enter (81 % of the blunt fin's
    rays, 96 % of the LOX post's, under 1 % of the combustor's). In the fragment stage the
    walk reads and writes its accumulation and state in place (image load/store,
-   ``IN_PLACE``): a layer shades only the pixels that have an entry in it. The compute
-   stage writes its two targets in turn, every pixel (copying those without an entry).
-   Either way a full-screen pass then marks the pixels still going on
+   ``IN_PLACE``): a layer shades only the pixels that have an entry in it. (Without image
+   load/store it uses two targets in turn, and a layer's pass also copies the pixels that
+   ended in the last; the compute stage writes its two targets in turn, every pixel.)
+   After each walk a full-screen pass marks the pixels still going on
    (``walk_entries.mark_alive``), the only ones the next layer's first entry draw shades;
-   their count, 0, ends the peeling without another entry pass. (Without image load/store
-   the fragment stage uses two targets in turn, and a layer's pass copies the pixels that
-   ended in the last.)
+   their count, 0, ends the peeling without another entry pass.
    The code for zero-volume cells and folded faces is compiled in only for meshes that have them
    (``rare_paths``), and runs in an outer loop that a group of pixels enters only when
    one of them needs it: llvmpipe runs every branch's code for the whole group, taken or
@@ -389,9 +388,6 @@ def draw(renderer, plan, data, texture):
     targets.marks_fbo.clear(depth=layer_depth(0) if start >= 0 else 1.0)
     # the marks: the entry passes' early depth test (both stages), and the fragment stage's walk's
     marker = (mark_prog, empty_vao(renderer, mark_prog))
-    # after each walk, the pixels whose ray goes on are marked alive (their count ends the
-    # peeling), where the walk's state is an image written whole: in place or compute
-    marks_alive = in_place or compute
     src = 0
     # as many layers as the last frame found entries in are drawn without waiting for
     # their entry counts (a layer without entries leaves every pixel as it was): one wait
@@ -414,7 +410,7 @@ def draw(renderer, plan, data, texture):
                                       count, marker, depth_scale(scene))
             else:
                 found = entries(ctx, entry_prog, faces if layer == 0 else reentry, data, flags, targets, src,
-                                query, start_vao if starting else None, count, layer, marker, marks_alive)
+                                query, start_vao if starting else None, count, layer, marker)
             if found == 0 and count:
                 break
             if layer == MAX_PASSES:         # the cap: what is left is counted, not walked
@@ -456,11 +452,12 @@ def draw(renderer, plan, data, texture):
         if compute or in_place:
             ctx.memory_barrier()        # the images' stores, before the next pass reads them
         alive = None
-        if marks_alive and layer < MAX_PASSES and reentry is not None:
+        if layer < MAX_PASSES and reentry is not None:
             if first_from_eye:          # every pixel walked: as if each had an entry
                 targets.entry_t_fbo.use()
                 targets.entry_t_fbo.clear(0.0, 0.0, 0.0, 0.0)
-            # counted where the next layer's entries would be: none alive, no next layer
+            # the pixels whose ray goes on, the only ones the next layer's first entry draw
+            # shades; counted where the next layer's entries would be: none, no next layer
             alive = mark_alive(ctx, targets, marker, layer, targets.state[dst], queries[MAX_PASSES],
                                layer + 1 >= counted_from)
         src = dst

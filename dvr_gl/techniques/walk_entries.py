@@ -29,8 +29,8 @@ def layer_depth(layer):
 
 def alive_depth(layer):
     """The window depth of the pixels whose walk in ``layer`` left the mesh without ending
-    (the walk in place, tetra_walk.py): only they can enter it again, so only they are
-    shaded by the next layer's first entry draw."""
+    (tetra_walk.py): only they can enter it again, so only they are shaded by the next
+    layer's first entry draw."""
     return 1.0 - (2 * layer + 2) / MARK_LEVELS
 
 
@@ -124,8 +124,7 @@ class StartFaces:
             self.buffer = None
 
 
-def entries(ctx, prog, faces, data, flags, targets, src, query, start=None, count=True, layer=0,
-            marker=None, alive_marks=False):
+def entries(ctx, prog, faces, data, flags, targets, src, query, start, count, layer, marker):
     """The entry pass of ``layer``: each pixel's nearest eligible entry (t, then the
     smallest cell at that t) into ``targets.entry_t`` and ``entry_cell``, and the pixels
     that have one marked at ``layer_depth(layer)`` in ``targets.marks`` (``marker``: the
@@ -134,8 +133,8 @@ def entries(ctx, prog, faces, data, flags, targets, src, query, start=None, coun
     returns that count (0: none, and the second draw is then not made; a count waits for
     the GPU), else None.
     After the first layer both draws test the marks early (walk_entry.frag), so that only
-    the pixels marked in the last layer (the first draw; ``alive_marks``: those marked
-    alive by ``mark_alive``) or in this one (the second) are shaded. ``start``: (vertex
+    the pixels marked alive after the last layer's walk (the first draw; ``mark_alive``)
+    or marked in this one (the second) are shaded. ``start``: (vertex
     array, vertices) of the start faces (orthographic rays that start inside the mesh),
     drawn too."""
 
@@ -165,9 +164,8 @@ def entries(ctx, prog, faces, data, flags, targets, src, query, start=None, coun
             depth_test(">=")      # the pixels marked in the last layer
         targets.entry_marked_fbo.use()
         # t_nearest is not read in this draw; bound to a texture not drawn into
-        last = (alive_depth if alive_marks else layer_depth)(layer - 1)
         bind(prog, dict(textures, t_nearest=targets.entry_cell),
-             {"u_test_depth": last + MARK_GAP if layer > 0 else 0.5})
+             {"u_test_depth": alive_depth(layer - 1) + MARK_GAP if layer > 0 else 0.5})
         render(False)
         ctx.disable(ctx.BLEND)
         if mark(ctx, targets, marker, layer, query, count) == 0:
@@ -205,9 +203,9 @@ def mark(ctx, targets, marker, layer, query, count, depth=None, state=None):
 
 
 def mark_alive(ctx, targets, marker, layer, state, query, count):
-    """After the walk of ``layer`` in place: the pixels it walked whose ray left the mesh
+    """After the walk of ``layer``: the pixels it walked whose ray left the mesh
     without ending, marked at ``alive_depth(layer)``, so that the next layer's first entry
-    draw shades only them (``entries``, ``alive_marks``). Returns their count with
+    draw shades only them (``entries``). Returns their count with
     ``count`` (0: no later layer can have an entry), else None."""
     try:
         return mark(ctx, targets, marker, layer, query, count, alive_depth(layer), state)

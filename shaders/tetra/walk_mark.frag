@@ -1,7 +1,7 @@
 // The cell walk's marks (techniques/tetra_walk.py): after a layer's entry pass, the
 // pixels that have an entry get the layer's window depth (walk_layer.vert); the rest
 // keep theirs. Drawn with an occlusion query: its count is the pixels with an entry.
-// u_alive (after a walk in place): of those, only the pixels whose ray goes on.
+// u_alive (after a layer's walk): of those, only the pixels whose ray goes on.
 #version 330 core
 
 uniform sampler2D t_entry_t;   // the entry pass: nearest eligible entry t (3e38: none)
