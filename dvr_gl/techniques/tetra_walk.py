@@ -352,7 +352,10 @@ def draw(renderer, plan, data, texture):
     view_proj = data_projection(scene, near=None if scene.camera.is_ortho else
                                 1e-6 * float(np.linalg.norm(mesh.extent))).astype("f4").tobytes()
     cam = camera_uniforms(scene)
-    for prog in (entry_prog, pick_prog) if pick_prog is not None else (entry_prog,):
+    starts = start_faces(mesh, scene.camera, walked)
+    start_prog = None if starts is None else renderer.programs.get(
+        "tetra/walk_entry.vert", "tetra/walk_entry.frag", dict(view, START_FACES=1), geometry="tetra/walk_entry.geom")
+    for prog in (p for p in (entry_prog, pick_prog, start_prog) if p is not None):
         bind(prog, {}, {**cam, "u_target_size": scene.target_size, "u_inflate": grow_pixels(ctx),
                         "u_start_margin": 1e-6 * float(np.linalg.norm(mesh.extent))})
         prog["u_view_proj"].write(view_proj)
@@ -368,11 +371,10 @@ def draw(renderer, plan, data, texture):
                              u_table_size=table.size)
     faces = walk.vao(ctx, entry_prog)
     reentry = walk.vao(ctx, entry_prog, reentry=True)
-    starts = start_faces(mesh, scene.camera, walked)
     start_vao = None
     if starts is not None:
-        start_vao = (renderer.resources.for_objects("tetra_walk_start", make=lambda: StartFaces(ctx), capacity=1).vao(
-            entry_prog, starts), len(starts))
+        start_vao = (start_prog, renderer.resources.for_objects(
+            "tetra_walk_start", make=lambda: StartFaces(ctx), capacity=1).vao(start_prog, starts), len(starts))
     # one occlusion query a layer: read after the frame's one wait, they say how many
     # layers had entries without waiting again
     queries = renderer.resources.get("tetra_walk_queries", "samples", lambda: [

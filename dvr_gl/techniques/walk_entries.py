@@ -77,7 +77,7 @@ class WalkTargets:
 def start_faces(mesh, camera, walked):
     """Orthographic: the faces of the (walked, not zero-volume) cells that the rays'
     start plane cuts, as ``boundary_faces`` lays them out, or None when it cuts none: a
-    ray starting inside one of them starts its walk there (walk_entry.frag, u_start_faces)."""
+    ray starting inside one of them starts its walk there (walk_entry.frag, START_FACES)."""
     if not camera.is_ortho:
         return None
     topo = topology(mesh)
@@ -134,16 +134,14 @@ def entries(ctx, prog, faces, data, flags, targets, src, query, start, count, la
     the GPU), else None.
     After the first layer both draws test the marks early (walk_entry.frag), so that only
     the pixels marked alive after the last layer's walk (the first draw; ``mark_alive``)
-    or marked in this one (the second) are shaded. ``start``: (vertex
-    array, vertices) of the start faces (orthographic rays that start inside the mesh),
-    drawn too."""
+    or marked in this one (the second) are shaded. ``start``: (program, vertex array,
+    vertices) of the start faces (orthographic rays that start inside the mesh; the
+    program built with START_FACES), drawn too."""
 
-    def render(pick):
-        bind(prog, {}, {"u_pick_cell": pick, "u_start_faces": False})
-        faces[0].render(ctx.TRIANGLES, vertices=faces[1])
-        if start is not None:
-            bind(prog, {}, {"u_start_faces": True})
-            start[0].render(ctx.TRIANGLES, vertices=start[1])
+    def render(pick, textures, uniforms):
+        for p, vao, vertices in ((prog, *faces), start) if start is not None else ((prog, *faces),):
+            bind(p, textures, {**uniforms, "u_pick_cell": pick})
+            vao.render(ctx.TRIANGLES, vertices=vertices)
 
     def entry_blending():
         ctx.enable(ctx.BLEND)
@@ -164,9 +162,8 @@ def entries(ctx, prog, faces, data, flags, targets, src, query, start, count, la
             depth_test(">=")      # the pixels marked in the last layer
         targets.entry_marked_fbo.use()
         # t_nearest is not read in this draw; bound to a texture not drawn into
-        bind(prog, dict(textures, t_nearest=targets.entry_cell),
-             {"u_test_depth": alive_depth(layer - 1) + MARK_GAP if layer > 0 else 0.5})
-        render(False)
+        render(False, dict(textures, t_nearest=targets.entry_cell),
+               {"u_test_depth": alive_depth(layer - 1) + MARK_GAP if layer > 0 else 0.5})
         ctx.disable(ctx.BLEND)
         if mark(ctx, targets, marker, layer, query, count) == 0:
             return 0
@@ -175,8 +172,7 @@ def entries(ctx, prog, faces, data, flags, targets, src, query, start, count, la
         targets.entry_cell_fbo.clear(NO_ENTRY, NO_ENTRY, NO_ENTRY, NO_ENTRY)
         depth_test(">=")          # the pixels just marked
         targets.entry_cell_marked_fbo.use()
-        bind(prog, textures, {"u_test_depth": layer_depth(layer) + MARK_GAP})
-        render(True)
+        render(True, textures, {"u_test_depth": layer_depth(layer) + MARK_GAP})
     finally:
         ctx.disable(ctx.BLEND | ctx.DEPTH_TEST)
         ctx.depth_func = "<"
@@ -238,7 +234,7 @@ def first_entries(ctx, prog, faces, data, flags, targets, src, query, count, mar
         # t_nearest is not read in this draw; bound to a texture not drawn into
         bind(prog, {"t_planes": data.planes, "t_flags": flags, "t_state": targets.state[src],
                     "t_nearest": targets.acc[src]},
-             {"u_test_depth": 0.5, "u_depth_scale": scale, "u_pick_cell": False, "u_start_faces": False})
+             {"u_test_depth": 0.5, "u_depth_scale": scale, "u_pick_cell": False})
         faces[0].render(ctx.TRIANGLES, vertices=faces[1])
         return mark(ctx, targets, marker, 0, query, count)
     finally:

@@ -28,6 +28,16 @@ void cellPlanes(int cell, vec3 eye, out mat3x4 normals, out vec4 room_at_eye) {
     room_at_eye = room;
 }
 
+// One face's plane (``slot``: 4 * cell + local face) in all four places: what cellPlanes
+// gives for that face, by the same arithmetic component for component, from one fetch
+// (the entry pass needs only the face's own crossing).
+void facePlane(int slot, vec3 eye, out mat3x4 normals, out vec4 room_at_eye) {
+    vec4 p = texelFetch(t_planes, texelRow(slot), 0);
+    normals = mat3x4(vec4(p.x), vec4(p.y), vec4(p.z));
+    PRECISE vec4 room = vec4(p.w) - normals * eye;
+    room_at_eye = room;
+}
+
 // Per plane: the ray's rate towards the outside (n . dir) and its distance t where it
 // crosses (inf where parallel); room: how far inside the ray's start is (d - n . origin).
 void cellCrossings(mat3x4 normals, vec4 room_at_eye, vec3 origin, vec3 dir, vec3 eye,

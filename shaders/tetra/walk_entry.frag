@@ -26,8 +26,9 @@ uniform sampler2D t_state;     // per pixel: (t of the last stop (>= 1e38: done)
 uniform sampler2D t_nearest;   // the first draw's result: the nearest eligible entry t
 uniform bool u_pick_cell;      // false: write t; true: write the cell, where t is the nearest
 uniform usampler2D t_flags;    // R8UI per cell: bit 1 (2): zero volume (tetra/walk.frag)
-uniform bool u_start_faces;    // the faces of cells the orthographic start plane cuts: an
-                               // entry at t = 0 where the pixel's ray starts inside the cell
+#ifndef START_FACES
+#define START_FACES 0          // the faces of cells the orthographic start plane cuts: an
+#endif                         // entry at t = 0 where the pixel's ray starts inside the cell
 uniform float u_start_margin;  // how far outside a cell a start still counts (float32 rounding)
 
 out vec4 frag_value;
@@ -61,22 +62,24 @@ void main() {
     vec3 origin, dir;
     pixelRay(origin, dir);
     int cell = v_slot / 4;
-    int face = v_slot - 4 * cell;
     mat3x4 normals;
     vec4 room_at_eye, along, room, t;
+#if START_FACES
     cellPlanes(cell, u_eye, normals, room_at_eye);
     cellCrossings(normals, room_at_eye, origin, dir, u_eye, along, room, t);
-    if (u_start_faces) {
-        if (any(lessThan(room, vec4(-u_start_margin)))) discard;
-        frag_value = vec4(u_pick_cell ? float(cell) : 0.0, 0.0, 0.0, 1.0);
-        if (u_pick_cell && texelFetch(t_nearest, ivec2(gl_FragCoord.xy), 0).r != 0.0) discard;
-        return;
-    }
+    if (any(lessThan(room, vec4(-u_start_margin)))) discard;
+    frag_value = vec4(u_pick_cell ? float(cell) : 0.0, 0.0, 0.0, 1.0);
+    if (u_pick_cell && texelFetch(t_nearest, ivec2(gl_FragCoord.xy), 0).r != 0.0) discard;
+    return;
+#endif
+    // the face's own plane is all it needs (in every component: take the first)
+    facePlane(v_slot, u_eye, normals, room_at_eye);
+    cellCrossings(normals, room_at_eye, origin, dir, u_eye, along, room, t);
     // the ray goes in here where it crosses the plane inwards; a zero-volume cell's planes
     // have no side, so crossing one of its boundary faces at all is an entry
     bool zero_volume = (texelFetch(t_flags, texelRow(cell), 0).r & 2u) != 0u;
-    if (!(zero_volume ? along[face] != 0.0 : along[face] < 0.0)) discard;
-    float t_entry = t[face];
+    if (!(zero_volume ? along.x != 0.0 : along.x < 0.0)) discard;
+    float t_entry = t.x;
     // the crossing inside the face's triangle (closed, with a margin of float32 rounding:
     // the faces that share an edge overlap by it rather than leave a gap between them)
     vec3 x = origin + t_entry * dir;

@@ -29,7 +29,9 @@ uniform sampler2D t_planes;    // RGBA32F, 4 per cell: outward unit normal, offs
 uniform usampler2D t_flags;    // R8UI per cell: bit 1 (2): zero volume
 uniform vec3 u_eye;            // relative to the mesh's lower corner
 uniform vec3 u_forward;
-uniform bool u_start_faces;    // faces of cells the start plane cuts (walk_entry.frag): all drawn
+#ifndef START_FACES
+#define START_FACES 0          // faces of cells the start plane cuts (walk_entry.frag): all drawn
+#endif
 uniform float u_test_depth;    // window depth, 0 to 1, of every fragment: the marks' early test (tetra_walk.py)
 flat out int v_slot;
 flat out vec3 v_corner0;     // the face's corners (relative to the mesh's lower corner)
@@ -49,7 +51,7 @@ void emit(vec4 position) {
 
 void main() {
     int cell = g_slot[0] / 4;
-    if (!u_start_faces && (texelFetch(t_flags, texelRow(cell), 0).r & 2u) == 0u) {
+    if (START_FACES == 0 && (texelFetch(t_flags, texelRow(cell), 0).r & 2u) == 0u) {
         vec4 plane = texelFetch(t_planes, texelRow(g_slot[0]), 0);
 #if ORTHO
         if (dot(plane.xyz, u_forward) > 1e-6) return;
