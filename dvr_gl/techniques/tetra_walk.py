@@ -377,7 +377,7 @@ def draw(renderer, plan, data, texture):
             "tetra_walk_start", make=lambda: StartFaces(ctx), capacity=1).vao(start_prog, starts), len(starts))
     # one occlusion query a layer: read after the frame's one wait, they say how many
     # layers had entries without waiting again
-    queries = renderer.resources.get("tetra_walk_queries", "samples", lambda: [
+    queries = renderer.resources.get("tetra_walk_queries", ("samples", MAX_PASSES), lambda: [
         ctx.query(samples=True) for _ in range(MAX_PASSES + 1)], capacity=None)
 
     ctx.disable(ctx.DEPTH_TEST | ctx.CULL_FACE | ctx.BLEND)

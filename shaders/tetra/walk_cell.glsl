@@ -16,6 +16,11 @@
 
 uniform sampler2D t_planes;   // RGBA32F, 4 per cell: outward unit normal, offset (n.x = d)
 
+// The entry pass's margin around a boundary face's triangle, of its barycentric
+// coordinates (walk_entry.frag tests the crossing with it; walk_entry.geom grows the
+// drawn triangle by as much)
+const float ENTRY_MARGIN = 1e-5;
+
 // The cell's outward normals by component (column k: component k of the four normals)
 // and the planes' offsets from the eye (d - n . eye), as tetra.vert has them.
 void cellPlanes(int cell, vec3 eye, out mat3x4 normals, out vec4 room_at_eye) {

@@ -54,8 +54,6 @@ uniform float u_depth_scale;
 layout(early_fragment_tests) in;
 #endif
 
-const float ENTRY_MARGIN = 1e-5;   // of the triangle's barycentric coordinates
-
 void main() {
     vec4 state = texelFetch(t_state, ivec2(gl_FragCoord.xy), 0);
     if (state.x >= 1.0e38) discard;            // this pixel's ray has ended

@@ -4,15 +4,16 @@
 // slab lost whole chords). So each face is drawn as its triangle in window coordinates
 // with every edge moved out by u_inflate pixels (twice the snapping;
 // techniques.common.grow_pixels) and by the fragment's margin (ENTRY_MARGIN of the
-// triangle's size, doubled, times its depth ratio); where a corner's angle is too sharp for that (the moved
-// edges meet more than a pixel away: a face seen nearly edge-on), as its outline's
-// bounding box grown by as much. Half the fragments of the box, on average.
+// triangle's size, doubled, times the ratio of its corners' depths); where a corner is
+// too sharp for that (the moved edges meet more than a pixel away: a face seen nearly
+// edge-on), as its outline's bounding box grown by as much. Half the box's fragments, on
+// average.
 // A face reaching to or behind the eye's plane (perspective) is drawn as it is, clipped by GL.
 // Faces no ray can enter are not drawn: the eye strictly inside the cell's plane
 // (perspective) or the view leaving through it (orthographic), beyond float32 rounding;
 // a zero-volume cell's planes have no side, so its faces are all drawn.
 #version 330 core
-#include "common/texel_rows.glsl"
+#include "tetra/walk_cell.glsl"
 
 #ifndef ORTHO
 #define ORTHO 0
@@ -25,7 +26,6 @@ flat in int g_slot[];
 in vec3 g_position[];
 uniform vec2 u_target_size;
 uniform float u_inflate;
-uniform sampler2D t_planes;    // RGBA32F, 4 per cell: outward unit normal, offset
 uniform usampler2D t_flags;    // R8UI per cell: bit 1 (2): zero volume
 uniform vec3 u_eye;            // relative to the mesh's lower corner
 uniform vec3 u_forward;
@@ -37,7 +37,6 @@ flat out int v_slot;
 flat out vec3 v_corner0;     // the face's corners (relative to the mesh's lower corner)
 flat out vec3 v_corner1;
 flat out vec3 v_corner2;
-const float ENTRY_MARGIN = 1e-5;   // walk_entry.frag's, of the triangle's barycentric coordinates
 
 void emit(vec4 position) {
     v_slot = g_slot[0];
