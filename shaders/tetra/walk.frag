@@ -233,11 +233,13 @@ int flatExit(int cell, vec3 x, vec3 dir, ivec4 nb, int prev) {
     return pick;
 }
 
-// Lockstep lanes: a pending segment's integral, then what gathered behind it, under `acc`
-void addPending(inout vec4 acc, vec4 pending_rgba, inout vec4 behind) {
+// Lockstep lanes: a pending segment's integral, then what gathered behind it, under `acc`;
+// true where the ray is opaque with them (the next segment waiting is then not added)
+bool addPending(inout vec4 acc, vec4 pending_rgba, inout vec4 behind) {
     acc += (1.0 - acc.a) * pending_rgba;
     acc += (1.0 - acc.a) * behind;
     behind = vec4(0.0);
+    return acc.a >= ERT_ALPHA;
 }
 
 void PIXEL_MAIN() {
@@ -430,9 +432,9 @@ void PIXEL_MAIN() {
                 held = true;
                 held_segment = vec3(s_front, s_back, b - a);
             } else {
-                if (pending) addPending(acc, pending_rgba, behind);   // the last one, integrated: added now
-                // opaque with it: this one is not added, as where the outer loop adds the last
-                bool opaque = acc.a >= ERT_ALPHA;
+                // the last one, integrated, added now; opaque with it: this one is not added,
+                // as where the outer loop adds the last
+                bool opaque = pending && addPending(acc, pending_rgba, behind);
                 done = done || opaque;
                 pending = !opaque;
                 integrated = false;
@@ -506,8 +508,7 @@ void PIXEL_MAIN() {
             integrated = true;
         }
         if (held || ending) {
-            addPending(acc, pending_rgba, behind);
-            bool opaque = acc.a >= ERT_ALPHA;
+            bool opaque = addPending(acc, pending_rgba, behind);
             done = done || opaque;
             pending = held && !opaque;   // opaque: a held one is not added (as in the stepping loop)
             integrated = false;

@@ -80,12 +80,10 @@ void main() {
     float grow = u_inflate + 2.0 * ENTRY_MARGIN * longest * (w_max / w_min);
     float turn = ab.x * ac.y - ab.y * ac.x;        // > 0: counter-clockwise
     vec2 outward[3];                               // edge k (q[k] to q[k + 1]): its outer unit normal
-    bool sharp = turn == 0.0;
+    bool sharp = turn == 0.0;                      // (so too where an edge has no length)
     for (int k = 0; k < 3; ++k) {
         vec2 e = q[(k + 1) % 3] - q[k];
-        float len = length(e);
-        sharp = sharp || len == 0.0;
-        outward[k] = (turn > 0.0 ? vec2(e.y, -e.x) : vec2(-e.y, e.x)) / max(len, 1e-30);
+        outward[k] = (turn > 0.0 ? vec2(e.y, -e.x) : vec2(-e.y, e.x)) / max(length(e), 1e-30);
     }
     vec2 moved[3];
     for (int k = 0; k < 3; ++k) {                  // where the moved edges k - 1 and k meet
