@@ -251,6 +251,20 @@ def test_ball_against_twin_exact_and_mpvo(renderer, view, mode):
         assert tetra_walk.eye_cell(scene.volume, scene.camera, M.topology(scene.volume).cell_planes()) >= 0
 
 
+@pytest.mark.parametrize("mode", ["mip", "average"])
+def test_a_projected_frame_after_a_walk_frame_keeps_its_rows(renderer, mode):
+    """``render`` has the last pass store rows top down (the read then needs no flip); the
+    walk's resolve and tetra's classify pass share a program, so the MPVO frame after a
+    walk frame must set its rows again, not keep the walk's setting (it came out upside
+    down)."""
+    scene = _ball("perspective", mode)
+    walked = renderer.render(scene, technique="tetra")
+    projected = renderer.render(scene, technique="tetra", sort="mpvo")
+    twin = reference.render(scene, technique="tetra")
+    assert np.abs(twin - twin[::-1]).max() > 50 * GL_TOL      # a flip would show
+    assert np.abs(walked - twin).max() < GL_TOL and np.abs(projected - twin).max() < GL_TOL
+
+
 def test_clips_geometry_shading_and_optical_models_as_tetra_draws_them(renderer):
     """Clip planes and a crop box cut each segment to the ray's kept interval, an opaque
     surface at its t_hit (the same rasterised t as tetra's), with the surface behind;

@@ -127,6 +127,16 @@ def target_fbo(renderer, width, height, dtype, kind="target", components=4):
         capacity=6).fbo
 
 
+def rows_top_down(renderer, fbo):
+    """Whether a pass that writes every pixel of ``fbo`` stores its rows top down: where
+    the renderer reads the image back next (``Renderer._draw``), whose read then needs no
+    flip. Every such pass sets its ``u_rows_top_down`` from this (its program is cached and
+    shared, so a value left from another frame would flip the image)."""
+    top_down = bool(getattr(renderer, "rows_top_down_wanted", False))
+    renderer.top_down_target = fbo if top_down else None
+    return top_down
+
+
 def draw_ray_compute(renderer, prog, scene, dtype):
     """Run the compute build of a per-pixel ray shader (``ProgramCache.compute``) once per
     pixel of the renderer's target for this size and ``dtype`` (f4, f2, f1), which it writes whole;
@@ -138,9 +148,7 @@ def draw_ray_compute(renderer, prog, scene, dtype):
     fbo = target_fbo(renderer, width, height, dtype)
     fbo.color_attachments[0].bind_to_image(0, read=False, write=True)
     prog["u_target_size"].value = (width, height)
-    top_down = getattr(renderer, "rows_top_down_wanted", False)     # (Renderer._draw: read back next)
-    prog["u_rows_top_down"].value = int(top_down)
-    renderer.top_down_target = fbo if top_down else None
+    prog["u_rows_top_down"].value = int(rows_top_down(renderer, fbo))
     prog.run((width + 7) // 8, (height + 7) // 8)
     ctx.memory_barrier()
     return fbo

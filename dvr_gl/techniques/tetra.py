@@ -79,7 +79,7 @@ from .common import (sample_term_uniforms, cleared_target, RepeatedIndices, Size
                      check_scene, check_target, clip_defines, clip_uniforms, data_projection, grow_pixels,
                      knot_uniforms)
 from .geometry import draw_surface_behind, surface_pass
-from .gpu import check_stage, empty_vao
+from .gpu import check_stage, empty_vao, rows_top_down
 
 MODES = ("composite", "mip", "minip", "average")
 TAKES_STEP = False
@@ -414,7 +414,8 @@ def draw(renderer, plan):
         classify_textures = {"t_reduced": reduced.color_attachments[0]}
         if surfaces is not None:
             classify_textures["t_surface"] = surfaces
-        bind(classify, classify_textures, {"u_knot_count": plan.knots.count})
+        bind(classify, classify_textures, {"u_knot_count": plan.knots.count,
+                                           "u_rows_top_down": rows_top_down(renderer, fbo)})
         knot_uniforms(classify, plan.knots, plan.defines["KNOT_CAPACITY"])
         empty_vao(renderer, classify).render(ctx.TRIANGLES, vertices=3)
     return fbo

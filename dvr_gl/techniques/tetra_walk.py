@@ -87,7 +87,7 @@ from ..model.mesh import topology
 from .common import (bind, camera_uniforms, clip_uniforms, data_projection, grow_pixels, knot_uniforms,
                      sample_term_uniforms)
 from .geometry import draw_surface_behind, surface_pass
-from .gpu import empty_vao, pixel_stage
+from .gpu import empty_vao, pixel_stage, rows_top_down
 from . import walk_entries
 from .walk_entries import (MARK_GAP, StartFaces, WalkTargets, depth_scale, entries, first_entries, layer_depth,
                            mark_alive, start_faces)
@@ -483,10 +483,7 @@ def draw(renderer, plan, data, texture):
         knot_uniforms(resolve, plan.knots, plan.defines["KNOT_CAPACITY"])
     if surfaces is not None:
         textures["t_surface"] = surfaces
-    # read back next (Renderer._draw): rows stored top down, so the read needs no flip
-    top_down = getattr(renderer, "rows_top_down_wanted", False)
-    bind(resolve, textures, {"u_rows_top_down": top_down})
-    renderer.top_down_target = fbo if top_down else None
+    bind(resolve, textures, {"u_rows_top_down": rows_top_down(renderer, fbo)})
     empty_vao(renderer, resolve).render(ctx.TRIANGLES, vertices=3)
     plan.walk_state = targets.state[src]
     return fbo
