@@ -70,7 +70,8 @@ steps in a layer than the mesh has cells (``max_steps``), or 512 in a row that t
 ray no further, end the ray, counted per pixel (``walk_counts``). Entries are taken in
 the order of (t, cell), each layer strictly after the last, so peeling cannot repeat an
 entry; it is bounded by ``MAX_PASSES`` (the pixels still having an entry then are
-counted in ``TetraPlan.walk_left``).
+counted in ``TetraPlan.walk_left``, with a warning). Cells too thin for float32 to
+order their crossings are passed as zero-volume ones (``walk_flat``).
 
 A perspective eye inside the mesh: the cell that holds it is found on the CPU (float64,
 once per view), and the first layer starts every ray there. An orthographic view whose
@@ -80,6 +81,8 @@ ray starts inside it. Not done: meshes of 2^24 cells or more (``WalkUnsupported`
 """
 
 from __future__ import annotations
+
+import warnings
 
 import numpy as np
 
@@ -92,7 +95,7 @@ from . import walk_entries
 from .walk_entries import (MARK_GAP, StartFaces, WalkTargets, depth_scale, entries, first_entries, layer_depth,
                            mark_alive, start_faces)
 
-MAX_PASSES = 64            # layers of depth peeling (entries along one ray) at most
+MAX_PASSES = 256           # layers of depth peeling (entries along one ray) at most
 HIDDEN_FRACTION = 0.5      # walk only the cells the TF shows where it hides this share (walked_cells)
 MAX_CELLS = 1 << 24        # cell numbers travel as float32 (MIN blending): exact below 2^24
 IN_PLACE = True            # the fragment stage's walk in place (False: two targets in turn)
@@ -143,10 +146,38 @@ def segment_table_texture(renderer, tf):
     return table, renderer.resources.for_objects("tetra_walk_segment_table", table, make=make, capacity=2)
 
 
+# A cell thinner than this times the mesh's diagonal is passed as a zero-volume one. The
+# walk's crossings are float32 (planes and eye relative to the mesh's corner): their t
+# is rounded by some 1e-7 of the diagonal (more for rays that graze a face), so in a
+# thinner cell the entry can come out behind the exit and the step take a face the ray
+# never crosses (Delaunay meshes of jittered or float32-stored lattice points have such
+# slivers, and lost whole rays). Passed by its triangles instead (flatExit), the cell
+# adds no segment: at most its height over the TF's unit distance of opacity, where the
+# ray crosses it squarely. No NASA mesh has such a cell (the thinnest: 1.9e-5).
+THIN = 1e-5
+
+
+def walk_flat(mesh):
+    """(M,) bool: the cells the walk passes by their triangles (walk.frag's FLAT): those
+    of zero volume and those thinner than ``THIN`` of the diagonal (the smallest height,
+    6 |V| over twice the largest face's area)."""
+    flat = mesh._derived.get("walk_flat")
+    if flat is None:
+        topo = topology(mesh)
+        p = (mesh.points - mesh.bounds[0])[topo.tets]
+        vol6 = np.abs(np.einsum("ij,ij->i", p[:, 1] - p[:, 0], np.cross(p[:, 2] - p[:, 0], p[:, 3] - p[:, 0])))
+        area2 = np.zeros(len(p))
+        for a, b, c in ((1, 2, 3), (0, 2, 3), (0, 1, 3), (0, 1, 2)):
+            area2 = np.maximum(area2, np.linalg.norm(np.cross(p[:, b] - p[:, a], p[:, c] - p[:, a]), axis=1))
+        height = vol6 / np.maximum(area2, 1e-300)
+        flat = mesh._derived["walk_flat"] = topo.flat | (height <= THIN * float(np.linalg.norm(mesh.extent)))
+    return flat
+
+
 def rare_paths(mesh):
     """walk.frag's switches for the rare cells this mesh has: WALK_FLAT (zero-volume
     cells) and WALK_FOLDS (folded faces), each 0 where it has none."""
-    return {"WALK_FLAT": int(topology(mesh).flat.any()), "WALK_FOLDS": int(folded_faces(mesh).any())}
+    return {"WALK_FLAT": int(walk_flat(mesh).any()), "WALK_FOLDS": int(folded_faces(mesh).any())}
 
 
 def max_steps(mesh):
@@ -162,7 +193,7 @@ def eye_cell(mesh, camera, planes):
     if camera.is_ortho or np.any(camera.eye < lo) or np.any(camera.eye > hi):
         return -1
     eye = camera.eye - lo
-    flat = topology(mesh).flat
+    flat = walk_flat(mesh)
     for start in range(0, len(planes), 1 << 18):
         chunk = planes[start:start + (1 << 18)]
         room = chunk[..., 3] - chunk[..., :3] @ eye
@@ -238,7 +269,8 @@ def folded_faces(mesh):
     sign[topo.tet_faces[~is_first], 1] = topo.tet_face_sign[~is_first]
     a, b = topo.face_cells[:, 0], topo.face_cells[:, 1]
     # a zero-volume cell's planes have no side (walk.frag passes such cells by their triangles)
-    solid = (b >= 0) & ~topo.flat[a] & ~topo.flat[np.maximum(b, 0)]
+    flat = walk_flat(mesh)
+    solid = (b >= 0) & ~flat[a] & ~flat[np.maximum(b, 0)]
     folded = solid & (sign[:, 0] == sign[:, 1])
     return folded[topo.tet_faces]
 
@@ -253,7 +285,7 @@ def walked_cells(mesh, visible):
     and a full-screen pass): scattered hidden cells are cheaper to walk through."""
     if len(visible) > (1.0 - HIDDEN_FRACTION) * mesh.n_tets:
         return None
-    walked = topology(mesh).flat.copy()
+    walked = walk_flat(mesh).copy()
     walked[visible] = True
     return walked
 
@@ -352,7 +384,7 @@ def draw(renderer, plan, data, texture):
     view_proj = data_projection(scene, near=None if scene.camera.is_ortho else
                                 1e-6 * float(np.linalg.norm(mesh.extent))).astype("f4").tobytes()
     cam = camera_uniforms(scene)
-    starts = start_faces(mesh, scene.camera, walked)
+    starts = start_faces(mesh, scene.camera, walked, walk_flat(mesh))
     start_prog = None if starts is None else renderer.programs.get(
         "tetra/walk_entry.vert", "tetra/walk_entry.frag", dict(view, START_FACES=1), geometry="tetra/walk_entry.geom")
     for prog in (p for p in (entry_prog, pick_prog, start_prog) if p is not None):
@@ -417,6 +449,9 @@ def draw(renderer, plan, data, texture):
                 break
             if layer == MAX_PASSES:         # the cap: what is left is counted, not walked
                 plan.walk_left = int(query.samples)
+                warnings.warn(f"tetra walk: {plan.walk_left} pixels still had an entry after {MAX_PASSES} layers "
+                              "of depth peeling, and their rays were cut there (sort='mpvo' has no such cap)",
+                              RuntimeWarning, stacklevel=2)
                 break
         dst = src if in_place else 1 - src
         (targets.in_place if in_place else targets.layers[dst]).use()
@@ -495,7 +530,7 @@ def cell_flags(mesh, visible):
     is folded (``folded_faces``)."""
     flags = np.zeros((mesh.n_tets, 1), np.uint8)
     flags[visible if visible is not None else slice(None)] = 1
-    flags[topology(mesh).flat, 0] |= 2
+    flags[walk_flat(mesh), 0] |= 2
     flags[:, 0] |= (folded_faces(mesh) * (4 << np.arange(4))).sum(axis=1).astype(np.uint8)
     return flags
 

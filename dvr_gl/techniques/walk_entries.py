@@ -13,7 +13,8 @@ from ..model.mesh import topology
 from .common import bind
 
 NO_ENTRY = 3.0e38
-MARK_LEVELS = 256          # the marks' window depths (layer_depth, alive_depth) are 1/MARK_LEVELS apart
+MARK_LEVELS = 1024         # the marks' window depths (layer_depth, alive_depth) are 1/MARK_LEVELS apart
+                           # (two a layer: tetra_walk.MAX_PASSES at most half of it)
 MARK_GAP = 0.5 / MARK_LEVELS   # a test depth halfway to the last mark's: rounding-proof
 FIRST_LAYER_PICK = True    # the first layer's entries in one draw by the depth test (False: two, as later layers)
 
@@ -74,8 +75,8 @@ class WalkTargets:
             t.release()
 
 
-def start_faces(mesh, camera, walked):
-    """Orthographic: the faces of the (walked, not zero-volume) cells that the rays'
+def start_faces(mesh, camera, walked, flat):
+    """Orthographic: the faces of the (walked, not ``flat``: passed by their triangles) cells that the rays'
     start plane cuts, as ``boundary_faces`` lays them out, or None when it cuts none: a
     ray starting inside one of them starts its walk there (walk_entry.frag, START_FACES)."""
     if not camera.is_ortho:
@@ -85,7 +86,7 @@ def start_faces(mesh, camera, walked):
     if not depth.min() < 0.0 < depth.max():
         return None
     d = depth[topo.tets]
-    cut = (d.min(axis=1) < 0.0) & (d.max(axis=1) > 0.0) & ~topo.flat
+    cut = (d.min(axis=1) < 0.0) & (d.max(axis=1) > 0.0) & ~flat
     if walked is not None:
         cut &= walked
     cell = np.repeat(np.flatnonzero(cut), 4)
