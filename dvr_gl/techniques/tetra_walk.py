@@ -175,8 +175,8 @@ def walk_flat(mesh):
 
 
 def rare_paths(mesh):
-    """walk.frag's switches for the rare cells this mesh has: WALK_FLAT (zero-volume
-    cells) and WALK_FOLDS (folded faces), each 0 where it has none."""
+    """walk.frag's switches for the rare cells this mesh has: WALK_FLAT (zero-volume or
+    too thin: ``walk_flat``) and WALK_FOLDS (folded faces), each 0 where it has none."""
     return {"WALK_FLAT": int(walk_flat(mesh).any()), "WALK_FOLDS": int(folded_faces(mesh).any())}
 
 
@@ -526,7 +526,7 @@ def draw(renderer, plan, data, texture):
 
 def cell_flags(mesh, visible):
     """(M, 1) uint8 per cell: 1 (SHOWN in walk.frag) for the cells in ``visible`` (all
-    cells when None), plus 2 (FLAT) for zero-volume cells, plus 4 << k where local face k
+    cells when None), plus 2 (FLAT) for the cells ``walk_flat`` gives, plus 4 << k where local face k
     is folded (``folded_faces``)."""
     flags = np.zeros((mesh.n_tets, 1), np.uint8)
     flags[visible if visible is not None else slice(None)] = 1
