@@ -50,7 +50,7 @@
 // code for zero-volume cells or folded faces costs every step when present (15-25 %
 // of the frame on the NASA meshes)
 #ifndef WALK_FLAT
-#define WALK_FLAT 1      // zero-volume cells among the walked ones (flatExit)
+#define WALK_FLAT 1      // flat cells among the walked ones (zero volume or too thin: walk_flat; flatExit)
 #endif
 #ifndef WALK_FOLDS
 #define WALK_FOLDS 1     // folded faces (foldedNext)
@@ -90,7 +90,7 @@ layout(rgba32f) uniform coherent image2D u_state_image;
 uniform sampler2D t_field;        // RGBA32F, 2 per cell: (gradient, value at the origin), range (model.mesh.cell_fields)
 uniform isampler2D t_neighbours;  // RGBA32I per cell: the cell across local face k (-1: boundary)
 uniform usampler2D t_flags;       // R8UI per cell: SHOWN (the TF gives some of its value range
-                                  // opacity), FLAT (zero volume)
+                                  // opacity), FLAT (zero volume, or too thin: tetra_walk.walk_flat)
 uniform isampler2D t_tets;        // RGBA32I per cell: its four points
 uniform sampler2D t_points;       // RGBA32F per point: position relative to the mesh's lower corner
 uniform sampler2D t_acc;          // the previous pass's accumulation

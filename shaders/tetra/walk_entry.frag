@@ -25,7 +25,7 @@ uniform sampler2D t_state;     // per pixel: (t of the last stop (>= 1e38: done)
                                // when that walk made no progress (else -1), 0, guard hits)
 uniform sampler2D t_nearest;   // the first draw's result: the nearest eligible entry t
 uniform bool u_pick_cell;      // false: write t; true: write the cell, where t is the nearest
-uniform usampler2D t_flags;    // R8UI per cell: bit 1 (2): zero volume (tetra/walk.frag)
+uniform usampler2D t_flags;    // R8UI per cell: bit 1 (2): zero volume or too thin (tetra/walk.frag)
 #ifndef START_FACES
 #define START_FACES 0          // the faces of cells the orthographic start plane cuts: an
 #endif                         // entry at t = 0 where the pixel's ray starts inside the cell

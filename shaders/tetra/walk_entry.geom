@@ -26,7 +26,7 @@ flat in int g_slot[];
 in vec3 g_position[];
 uniform vec2 u_target_size;
 uniform float u_inflate;
-uniform usampler2D t_flags;    // R8UI per cell: bit 1 (2): zero volume
+uniform usampler2D t_flags;    // R8UI per cell: bit 1 (2): zero volume or too thin (tetra_walk.walk_flat)
 uniform vec3 u_eye;            // relative to the mesh's lower corner
 uniform vec3 u_forward;
 #ifndef START_FACES
