@@ -31,10 +31,9 @@ Per view, the CPU uploads a camera; then, per layer of depth peeling:
 2. walk pass (``walk.frag``, a full-screen triangle tested against the marks: the pixels
    with an entry in the last layer (the first: in this one); llvmpipe skips the blocks
    of pixels without one): from its entry, each pixel's ray goes from cell to cell
-   through the face adjacency; in each cell the segment is tetra's own
-   (largest entering and smallest leaving plane crossing, the same float32 arithmetic),
-   cut to the clip's kept interval and at the first opaque surface, integrated exactly
-   (``common/linear_segment.glsl``) and composited front to back. Leaving through a
+   through the face adjacency (the exit faces and segments: below); each cell's segment
+   is cut to the clip's kept interval and at the first opaque surface, integrated
+   exactly (``common/linear_segment.glsl``) and composited front to back. Leaving through a
    boundary face ends the layer for that pixel; a non-convex domain's re-entry is the
    next layer's entry. A pixel is done at the end of its kept interval or at opacity 1 -
    2^-20 (composite), and when it leaves through a face on the convex hull (not grazing
@@ -58,23 +57,41 @@ Per view, the CPU uploads a camera; then, per layer of depth peeling:
 3. resolve: the accumulation into the image's target (composite, with the surface
    behind it) or classified (mip, minip, average: ``tetra_classify.frag``).
 
-Hard cases. Rays through edges and vertices: of tied leaving planes the first is taken;
-the cells around the edge or vertex are then passed with empty segments (each has one
-leaving plane at the tie). Zero-volume cells have planes without a side: the ray passes
-one through the face whose triangle holds its crossing, into a cell it enters there.
-Folded cells (both cells of a face on one side of it): the walk never steps back across
-the face it came in by, a folded face is an entry face too, and a cell that offers no
-way on hands the ray to a folded neighbour that holds it further; the overlap is then
-counted once, as the exact image counts it. Guards (a cycle made by rounding): more
-steps in a layer than the mesh has cells (``max_steps``), or 512 in a row that take the
-ray no further, end the ray, counted per pixel (``walk_counts``). Entries are taken in
-the order of (t, cell), each layer strictly after the last, so peeling cannot repeat an
-entry; it is bounded by ``MAX_PASSES`` (the pixels still having an entry then are
-counted in ``TetraPlan.walk_left``, with a warning). Cells too thin for float32 to
-order their crossings are passed as zero-volume ones (``walk_flat``).
+Exits by topology (``rare_paths``' WALK_TOPO, ``tetra/walk_topo.glsl``; every mesh
+without folded faces, views from outside it or orthographic): seen along the ray, every
+corner is a point of the plane across it, and which side of an edge the ray passes is
+the sign of an exact 2x2 determinant of its corners' rounded positions, the same in
+every cell around the edge. A cell entered by a face that holds the ray has exactly one
+other face that holds it; the walk leaves by that one, and the segment runs from where
+the ray came in to where it crosses that face's plane (none where that crossing is not
+ahead: a sliver's crossings out of order, a zero-volume cell, a face the ray runs in).
+Rays through edges and vertices are ties, broken by a perturbation of the ray the same
+way in every cell (simulation of simplicity). So slivers, cells of zero volume and rays
+along faces need no rules of their own, and the walk cannot lose its way where the
+planes' float32 crossings disagree (Delaunay meshes of lattice points: 0.03 to 0.15 off
+before). Near an edge of a boundary face the entry pass, too, asks the signs.
+
+Otherwise (folded faces, or a perspective eye inside the mesh), the planes decide: rays
+through edges and vertices take the first of tied leaving planes, the cells around the
+edge or vertex then passed with empty segments (each has one leaving plane at the tie).
+Zero-volume cells have planes without a side: the ray passes one through the face whose
+triangle holds its crossing, into a cell it enters there; cells too thin for float32 to
+order their crossings are passed as zero-volume ones (``walk_flat``). Folded cells (both
+cells of a face on one side of it): the walk never steps back across the face it came in
+by, a folded face is an entry face too, and a cell that offers no way on hands the ray
+to a folded neighbour that holds it further; the overlap is then counted once, as the
+exact image counts it.
+
+Guards (a cycle made by rounding): more steps in a layer than the mesh has cells
+(``max_steps``), or 512 in a row that take the ray no further, end the ray, counted per
+pixel (``walk_counts``). Entries are taken in the order of (t, cell), each layer
+strictly after the last, so peeling cannot repeat an entry; it is bounded by
+``MAX_PASSES`` (the pixels still having an entry then are counted in
+``TetraPlan.walk_left``, with a warning).
 
 A perspective eye inside the mesh: the cell that holds it is found on the CPU (float64,
-once per view), and the first layer starts every ray there. An orthographic view whose
+once per view), and the first layer starts every ray there (by the planes' rule: an eye
+on a vertex or edge starts rays in cells that the topology says they miss). An orthographic view whose
 start plane cuts the mesh: the faces of the cells it cuts (found per view, ``start_faces``)
 are drawn in the first entry pass too, each fragment taking t = 0 in its cell where its
 ray starts inside it. Not done: meshes of 2^24 cells or more (``WalkUnsupported``).
@@ -99,6 +116,7 @@ MAX_PASSES = 256           # layers of depth peeling (entries along one ray) at 
 HIDDEN_FRACTION = 0.5      # walk only the cells the TF shows where it hides this share (walked_cells)
 MAX_CELLS = 1 << 24        # cell numbers travel as float32 (MIN blending): exact below 2^24
 IN_PLACE = True            # the fragment stage's walk in place (False: two targets in turn)
+EXITS_BY_TOPOLOGY = True   # walk_topo.glsl's exits where the mesh and view allow (False: the planes' everywhere)
 
 
 class WalkUnsupported(ValueError):
@@ -176,8 +194,12 @@ def walk_flat(mesh):
 
 def rare_paths(mesh):
     """walk.frag's switches for the rare cells this mesh has: WALK_FLAT (zero-volume or
-    too thin: ``walk_flat``) and WALK_FOLDS (folded faces), each 0 where it has none."""
-    return {"WALK_FLAT": int(walk_flat(mesh).any()), "WALK_FOLDS": int(folded_faces(mesh).any())}
+    too thin: ``walk_flat``) and WALK_FOLDS (folded faces), each 0 where it has none; and
+    WALK_TOPO, the exits by topology (tetra/walk_topo.glsl), for every mesh without folded
+    faces (a folded pair covers part of space twice, which the topology cannot tell)."""
+    folds = int(folded_faces(mesh).any())
+    return {"WALK_FLAT": int(walk_flat(mesh).any()), "WALK_FOLDS": folds,
+            "WALK_TOPO": int(EXITS_BY_TOPOLOGY and not folds)}
 
 
 def max_steps(mesh):
@@ -365,7 +387,10 @@ def draw(renderer, plan, data, texture):
                                     make=lambda m, cam: eye_cell(m, cam, planes))
         if walked is not None and start >= 0 and not walked[start]:
             start = -1       # the eye in a cell not walked: rays start at their first entry
-    view = {"ORTHO": 1} if scene.camera.is_ortho else {}
+    rare = dict(renderer.tables.get(f"tetra_walk_rare_paths:{EXITS_BY_TOPOLOGY}", mesh, make=rare_paths))
+    if start >= 0:
+        rare["WALK_TOPO"] = 0    # rays from an eye inside: the planes' rule (the topology needs a face in)
+    view = {**({"ORTHO": 1} if scene.camera.is_ortho else {}), "WALK_TOPO": rare["WALK_TOPO"]}
     compute = pixel_stage(renderer, plan.stage) == "compute"
     # the fragment stage's walk in place where the GL has image load/store (4.2)
     in_place = not compute and IN_PLACE and ctx.version_code >= 420
@@ -377,7 +402,7 @@ def draw(renderer, plan, data, texture):
         pick_prog = renderer.programs.get("tetra/walk_entry.vert", "tetra/walk_entry.frag", dict(view, DEPTH_PICK=1),
                                           geometry="tetra/walk_entry.geom")
     mark_prog = renderer.programs.get("tetra/walk_layer.vert", "tetra/walk_mark.frag")
-    walk_defines = {**plan.defines, **renderer.tables.get("tetra_walk_rare_paths", mesh, make=rare_paths),
+    walk_defines = {**plan.defines, **rare,
                     **({"IN_PLACE": 1} if in_place else {})}
     walk_prog = (renderer.programs.compute("tetra/walk.frag", walk_defines) if compute else
                  renderer.programs.get("tetra/walk_layer.vert", "tetra/walk.frag", walk_defines))

@@ -155,7 +155,7 @@ def entries(ctx, prog, faces, data, flags, targets, src, query, start, count, la
 
     entry_blending()
     textures = {"t_planes": data.planes, "t_flags": flags, "t_state": targets.state[src],
-                "t_nearest": targets.entry_t}
+                "t_nearest": targets.entry_t, "t_tets": data.tets, "t_points": data.points}
     try:
         targets.entry_t_fbo.use()
         targets.entry_t_fbo.clear(NO_ENTRY, NO_ENTRY, NO_ENTRY, NO_ENTRY)
@@ -234,7 +234,7 @@ def first_entries(ctx, prog, faces, data, flags, targets, src, query, count, mar
         targets.entry_pick_fbo.clear(NO_ENTRY, NO_ENTRY, NO_ENTRY, NO_ENTRY, depth=1.0)
         # t_nearest is not read in this draw; bound to a texture not drawn into
         bind(prog, {"t_planes": data.planes, "t_flags": flags, "t_state": targets.state[src],
-                    "t_nearest": targets.acc[src]},
+                    "t_nearest": targets.acc[src], "t_tets": data.tets, "t_points": data.points},
              {"u_test_depth": 0.5, "u_depth_scale": scale, "u_pick_cell": False})
         faces[0].render(ctx.TRIANGLES, vertices=faces[1])
         return mark(ctx, targets, marker, 0, query, count)

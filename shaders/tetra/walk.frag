@@ -1,15 +1,17 @@
 // The cell walk (techniques/tetra_walk.py), one full-screen pass per layer of depth
 // peeling: each pixel's ray starts in the cell the entry pass found for it (or, for a
 // perspective eye inside the mesh, in the eye's cell), and goes from cell to cell through
-// the face adjacency. In a cell, the segment is the one tetra.frag finds (the same
-// planes and arithmetic: entry at the largest entering crossing, exit at the smallest
-// leaving one), cut to the clip's kept interval and at the first surface, integrated
-// exactly (common/linear_segment.glsl) and composited front to back; the ray then steps
-// to the neighbour across the exit face (the first of tied ones: through an edge or a
-// vertex, the cells around it are passed with empty segments). A neighbour of -1 (the
-// boundary) ends this pass's walk; the next entry pass looks for a re-entry beyond it.
+// the face adjacency. WALK_TOPO: the exit face is the topology's (tetra/walk_topo.glsl),
+// the segment from where the ray came in to that face's plane. Else the planes': the
+// segment is the one tetra.frag finds (the same planes and arithmetic: entry at the
+// largest entering crossing, exit at the smallest leaving one) and the ray steps to the
+// neighbour across the exit face (the first of tied ones: through an edge or a vertex,
+// the cells around it are passed with empty segments). Each segment is cut to the clip's
+// kept interval and at the first surface, integrated exactly (common/linear_segment.glsl)
+// and composited front to back. A neighbour of -1 (the boundary) ends this pass's walk;
+// the next entry pass looks for a re-entry beyond it.
 // mip / minip / average: the running extreme, or integral and length (tetra_classify.frag).
-// Zero-volume cells (flatExit) and folded cells (foldedNext) have rules of their own.
+// By the planes, zero-volume cells (flatExit) and folded cells (foldedNext) have rules of their own.
 // The pixel is done when its ray reaches the end of its kept interval, when composite
 // opacity reaches ERT_ALPHA, or at a guard against cycles (MAX_STALLED, u_max_steps).
 #version 330 core
@@ -55,6 +57,15 @@
 #ifndef WALK_FOLDS
 #define WALK_FOLDS 1     // folded faces (foldedNext)
 #endif
+#ifndef WALK_TOPO
+#define WALK_TOPO 0      // exit faces by topology (tetra/walk_topo.glsl): thin cells need no rule of their own
+#endif
+#if WALK_TOPO             // (tetra_walk.rare_paths: only for meshes without folded faces)
+#undef WALK_FLAT
+#define WALK_FLAT 0
+#undef WALK_FOLDS
+#define WALK_FOLDS 0
+#endif
 #ifndef LOCKSTEP_LANES
 #define LOCKSTEP_LANES 0 // the context's: pixels shaded in lockstep pay for branches none takes
 #endif
@@ -91,13 +102,13 @@ uniform sampler2D t_field;        // RGBA32F, 2 per cell: (gradient, value at th
 uniform isampler2D t_neighbours;  // RGBA32I per cell: the cell across local face k (-1: boundary)
 uniform usampler2D t_flags;       // R8UI per cell: SHOWN (the TF gives some of its value range
                                   // opacity), FLAT (zero volume, or too thin: tetra_walk.walk_flat)
-uniform isampler2D t_tets;        // RGBA32I per cell: its four points
-uniform sampler2D t_points;       // RGBA32F per point: position relative to the mesh's lower corner
 uniform sampler2D t_acc;          // the previous pass's accumulation
 uniform sampler2D t_state;        // the previous pass's state (tetra/walk_entry.frag)
 uniform sampler2D t_entry_t;      // the entry pass: nearest eligible entry t (3e38: none)
 uniform sampler2D t_entry_cell;   // and its cell
 uniform int u_start_cell;         // >= 0: every ray starts in this cell at t = 0
+// t_tets, t_points; the topology's exits (WALK_TOPO)
+#include "tetra/walk_topo.glsl"
 uniform int u_max_steps;
 #if GEOMETRY
 uniform sampler2D t_surface;      // the first surface's lit colour and t (3e38: none)
@@ -174,6 +185,9 @@ const int HULL = -2;         // t_neighbours: across a boundary face on the conv
 // A ray leaving through the hull has nothing left to enter, but for rounding where it
 // grazes the face: at least this rate outwards (the cosine to the face's normal)
 const float HULL_ALONG = 1e-3;
+// WALK_TOPO: a ray leaving a cell at less than this rate (the cosine to the face's normal)
+// is taken as running in the face's plane (no segment in the cell; the next one takes it)
+const float GRAZING = 1e-4;
 
 // A cell with folded faces (a neighbour on the same side of their shared face, as some
 // curvilinear grids have) that offers the ray no way on: the ray may go on in a folded
@@ -290,6 +304,20 @@ void PIXEL_MAIN() {
     // of pixels enters again only when one of them needs it: llvmpipe runs the code of an
     // if for every pixel, taken or not, so in the inner loops that code would cost every
     // step (the rare steps' alone a quarter of the blunt fin's frame).
+#if WALK_TOPO
+    vec3 across_x, across_y;
+    rayFrame(dir, across_x, across_y);
+    ivec3 face_ids;         // the face the ray came into `cell` by (walk_topo.glsl)
+    vec4 face_s0, face_s1, face_s2;   // its corners across the ray (acrossRay)
+    {
+        mat3x4 normals;
+        vec4 room_at_eye, along, room, t;
+        cellPlanes(cell, u_eye, normals, room_at_eye);
+        cellCrossings(normals, room_at_eye, origin, dir, u_eye, along, room, t);
+        startFace(cell, texelFetch(t_neighbours, texelRow(cell), 0), u_start_cell >= 0 || t_cur <= 0.0 ? -3 : -1,
+                  origin, across_x, across_y, along, face_ids, face_s0, face_s1, face_s2);
+    }
+#endif
     bool done = false;      // the ray has ended (kept interval, opacity); else it left the mesh
     bool left = false;
     int steps = 0;
@@ -331,6 +359,35 @@ void PIXEL_MAIN() {
                 break;
             }
 #endif
+#if WALK_TOPO
+            {
+                // The topology says the ray is in this cell from t_cur (where it came in)
+                // and leaves by `face`: the segment ends where it crosses that face's plane,
+                // from t_cur (segments tile the ray whatever the rounding). None where the
+                // crossing is not ahead (a sliver's crossings out of order, a zero-volume
+                // cell) or the ray nearly in the face's plane (its crossing
+                // ill-conditioned): the next cell's segment then starts at t_cur, and its
+                // field is this one's on the face between them.
+                int face = topoExit(cell, origin, across_x, across_y, face_ids, face_s0, face_s1, face_s2);
+                float along_face;
+                float t_face = faceCrossing(4 * cell + face, u_eye, origin, dir, along_face);
+                float t_end = along_face > GRAZING && t_face > t_cur ? t_face : t_cur;
+                a = max(t_cur, kept.x);
+                b = min(t_end, kept.y);
+                if (b > a && (MODE_COMPOSITE == 0 || (flags & SHOWN) != 0u)) {
+                    found = true;
+                    seg_cell = cell;
+                }
+                stalled = t_end > t_cur ? 0 : stalled + 1;
+                t_cur = max(t_cur, t_end);
+                next = nb[face];
+                if (next == HULL && along_face > HULL_ALONG) done = true;   // no re-entry: no next layer
+                if (t_cur >= kept.y) {
+                    done = true;
+                    break;
+                }
+            }
+#else
             {
                 mat3x4 normals;
                 vec4 room_at_eye, along, room, t;
@@ -382,6 +439,7 @@ void PIXEL_MAIN() {
                     break;
                 }
             }
+#endif
 #if WALK_FOLDS
             if (rare != 0) break;
 #endif

@@ -59,4 +59,20 @@ void cellCrossings(mat3x4 normals, vec4 room_at_eye, vec3 origin, vec3 dir, vec3
     t = r / a;
 }
 
+// One face's plane (slot: 4 * cell + local face): where the ray crosses it, and its rate
+// outwards (along). The walk by topology (tetra/walk_topo.glsl) ends a cell's segment
+// here and its entry pass finds entries here: the same function, so a ray leaving by a
+// boundary face enters a cell across the same plane (not joined) at the same t.
+float faceCrossing(int slot, vec3 eye, vec3 origin, vec3 dir, out float along) {
+    vec4 p = texelFetch(t_planes, texelRow(slot), 0);
+    PRECISE float rate = dot(p.xyz, dir);
+    PRECISE float room = p.w - dot(p.xyz, eye);
+#if ORTHO
+    PRECISE vec3 offset = origin - eye;
+    room = room - dot(p.xyz, offset);
+#endif
+    along = rate;
+    return room / rate;
+}
+
 #endif

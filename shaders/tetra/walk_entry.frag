@@ -16,6 +16,12 @@
 
 #include "common/camera_ray.glsl"
 #include "tetra/walk_cell.glsl"
+#ifndef WALK_TOPO
+#define WALK_TOPO 0            // the walk's exits by topology: its entries too (walk_topo.glsl)
+#endif
+#if WALK_TOPO
+#include "tetra/walk_topo.glsl"
+#endif
 
 flat in int v_slot;
 flat in vec3 v_corner0;        // the face's corners (walk_entry.geom)
@@ -66,27 +72,53 @@ void main() {
     cellPlanes(cell, u_eye, normals, room_at_eye);
     cellCrossings(normals, room_at_eye, origin, dir, u_eye, along, room, t);
     if (any(lessThan(room, vec4(-u_start_margin)))) discard;
+#if WALK_TOPO
+    // and the walk's signs say the cell holds the ray (a start in a face shared by two
+    // cells: the one the ties are broken towards)
+    vec3 start_x, start_y;
+    rayFrame(dir, start_x, start_y);
+    if (!cellHoldsRay(texelFetch(t_tets, texelRow(cell), 0), origin, start_x, start_y)) discard;
+#endif
     frag_value = vec4(u_pick_cell ? float(cell) : 0.0, 0.0, 0.0, 1.0);
     if (u_pick_cell && texelFetch(t_nearest, ivec2(gl_FragCoord.xy), 0).r != 0.0) discard;
     return;
 #endif
-    // the face's own plane is all it needs (in every component: take the first)
+    // the face's own plane is all it needs (in every component: take the first), by the
+    // walk's arithmetic for its exits
+#if WALK_TOPO
+    float face_along;
+    float t_entry = faceCrossing(v_slot, u_eye, origin, dir, face_along);
+#else
     facePlane(v_slot, u_eye, normals, room_at_eye);
     cellCrossings(normals, room_at_eye, origin, dir, u_eye, along, room, t);
+    float face_along = along.x;
+    float t_entry = t.x;
+#endif
     // the ray goes in here where it crosses the plane inwards; a zero-volume cell's planes
     // have no side, so crossing one of its boundary faces at all is an entry
     bool zero_volume = (texelFetch(t_flags, texelRow(cell), 0).r & 2u) != 0u;
-    if (!(zero_volume ? along.x != 0.0 : along.x < 0.0)) discard;
-    float t_entry = t.x;
+    if (!(zero_volume ? face_along != 0.0 : face_along < 0.0)) discard;
     // the crossing inside the face's triangle (closed, with a margin of float32 rounding:
     // the faces that share an edge overlap by it rather than leave a gap between them)
     vec3 x = origin + t_entry * dir;
     vec3 ab = v_corner1 - v_corner0, bc = v_corner2 - v_corner1, ca = v_corner0 - v_corner2;
     vec3 m = cross(ab, -ca);
     float mm = dot(m, m);
-    float margin = -ENTRY_MARGIN * mm;
-    if (dot(cross(ab, x - v_corner0), m) < margin || dot(cross(bc, x - v_corner1), m) < margin
-        || dot(cross(ca, x - v_corner2), m) < margin) discard;
+    float margin = ENTRY_MARGIN * mm;
+    float inside = min(min(dot(cross(ab, x - v_corner0), m), dot(cross(bc, x - v_corner1), m)), dot(cross(ca, x - v_corner2), m));
+    if (inside < -margin) discard;
+#if WALK_TOPO
+    // within the margin of an edge, the walk's own signs decide: faces that share an edge
+    // then neither overlap nor leave a gap, and the walk's first cell is entered by a face
+    // it agrees holds the ray (a sliver's faces on the boundary, for one)
+    if (inside <= margin) {
+        vec3 across_x, across_y;
+        rayFrame(dir, across_x, across_y);
+        int k = v_slot - 4 * cell;
+        ivec4 v = texelFetch(t_tets, texelRow(cell), 0);
+        if (!faceHolds(ivec3(v[(k + 1) & 3], v[(k + 2) & 3], v[(k + 3) & 3]), origin, across_x, across_y)) discard;
+    }
+#endif
     if (!(t_entry > state.x || (t_entry == state.x && float(cell) > state.y))) discard;
 #if DEPTH_PICK
     frag_value = vec4(t_entry, 0.0, 0.0, 1.0);
