@@ -216,7 +216,8 @@ def test_lattice_delaunay_is_walked_by_its_topology(renderer):
     planes' rule lost whole rays here: RMSE 0.09 to 0.15, 200 to 570 pixels off by more
     than 0.01 at 80x80). By the topology every exit is decided once per edge, the same
     in every cell around it: GL within its bound of exact, no guard. And the unjittered
-    lattice seen along an axis, its rays in the planes of faces (ties)."""
+    lattice seen along an axis, its rays in the planes of faces (ties); and the jittered
+    one from an eye inside it, clear of its cell's edges (the topology's exits too)."""
     grid = np.stack(np.meshgrid(*[np.linspace(0.0, 1.0, 6)] * 3, indexing="ij"), -1).reshape(-1, 3)
     jittered = grid + np.random.default_rng(5).normal(scale=1e-10, size=grid.shape)
     for points, views in ((jittered, ((30, 20, False), (45, 35.264, True))), (grid, ((90, 0, True), (0, 0, False)))):
@@ -225,8 +226,14 @@ def test_lattice_delaunay_is_walked_by_its_topology(renderer):
         assert tetra_walk.rare_paths(mesh)["WALK_TOPO"] == 1 and tetra_walk.walk_flat(mesh).sum() > 50
         tf = TransferFunction(color=[(0.0, 0.2, 0.4, 0.9), (1.0, 0.9, 0.2, 0.1)], opacity=[(0.0, 0.1), (1.0, 0.8)],
                               unit_distance=0.3)
-        for az, el, ortho in views:
-            scene = Scene(mesh, tf, dvr_gl.default_camera(mesh, azimuth=az, elevation=el, ortho=ortho), 48, 48)
+        cameras = [dvr_gl.default_camera(mesh, azimuth=az, elevation=el, ortho=ortho) for az, el, ortho in views]
+        if points is jittered:
+            inside = Camera((0.43, 0.37, 0.61), (0.9, 0.5, 0.1), fov=70)
+            cell = tetra_walk.eye_cell(mesh, inside, M.topology(mesh).cell_planes())
+            assert tetra_walk.eye_clear_of_edges(mesh, inside, cell)
+            cameras.append(inside)
+        for camera in cameras:
+            scene = Scene(mesh, tf, camera, 48, 48)
             img, plan = walk(renderer, scene)
             assert np.abs(img - reference.exact(scene)).max() < GL_TOL
             assert img[..., 3].mean() > 0.1 and tetra_walk.walk_counts(renderer, plan)[1] == 0

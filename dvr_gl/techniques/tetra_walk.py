@@ -58,7 +58,8 @@ Per view, the CPU uploads a camera; then, per layer of depth peeling:
    behind it) or classified (mip, minip, average: ``tetra_classify.frag``).
 
 Exits by topology (``rare_paths``' WALK_TOPO, ``tetra/walk_topo.glsl``; every mesh
-without folded faces, views from outside it or orthographic): seen along the ray, every
+without folded faces, but for a perspective eye on an edge or a vertex of its cell,
+``eye_clear_of_edges``): seen along the ray, every
 corner is a point of the plane across it, and which side of an edge the ray passes is
 the sign of an exact 2x2 determinant of its corners' rounded positions, the same in
 every cell around the edge. A cell entered by a face that holds the ray has exactly one
@@ -71,7 +72,7 @@ along faces need no rules of their own, and the walk cannot lose its way where t
 planes' float32 crossings disagree (Delaunay meshes of lattice points: 0.03 to 0.15 off
 before). Near an edge of a boundary face the entry pass, too, asks the signs.
 
-Otherwise (folded faces, or a perspective eye inside the mesh), the planes decide: rays
+Otherwise (folded faces, or an eye on an edge or a vertex), the planes decide: rays
 through edges and vertices take the first of tied leaving planes, the cells around the
 edge or vertex then passed with empty segments (each has one leaving plane at the tie).
 Zero-volume cells have planes without a side: the ray passes one through the face whose
@@ -90,8 +91,8 @@ strictly after the last, so peeling cannot repeat an entry; it is bounded by
 ``TetraPlan.walk_left``, with a warning).
 
 A perspective eye inside the mesh: the cell that holds it is found on the CPU (float64,
-once per view), and the first layer starts every ray there (by the planes' rule: an eye
-on a vertex or edge starts rays in cells that the topology says they miss). An orthographic view whose
+once per view), and the first layer starts every ray there (by the planes' rule where
+the eye is on an edge or a vertex of that cell: rays from it may miss the cell). An orthographic view whose
 start plane cuts the mesh: the faces of the cells it cuts (found per view, ``start_faces``)
 are drawn in the first entry pass too, each fragment taking t = 0 in its cell where its
 ray starts inside it. Not done: meshes of 2^24 cells or more (``WalkUnsupported``).
@@ -206,6 +207,26 @@ def max_steps(mesh):
     """The step guard of one layer's walk: a walk that makes progress meets each cell at
     most once, so more steps than cells can only be a cycle made by rounding."""
     return int(mesh.n_tets) + 4
+
+
+EYE_CLEAR = 1e-5           # the eye this share of the diagonal off its cell's edges: the topology's exits
+
+
+def eye_clear_of_edges(mesh, camera, cell):
+    """Whether a perspective eye in ``cell`` lies at least ``EYE_CLEAR`` of the mesh's
+    diagonal off each of its edges: every line through it then meets the cell (on a face
+    too: behind or ahead), so the topology's signs hold each ray in the cell and the walk
+    may leave by them (walk_topo.glsl). Rays from an eye on an edge or a vertex start in
+    the cell that holds the eye but may, by the signs, miss it."""
+    topo = topology(mesh)
+    corners = mesh.points[topo.tets[cell]]
+    pairs = [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)]
+    a = corners[[i for i, _ in pairs]]
+    b = corners[[j for _, j in pairs]]
+    along = np.clip(np.einsum("ij,ij->i", camera.eye - a, b - a) / np.maximum(np.einsum("ij,ij->i", b - a, b - a),
+                                                                               1e-300), 0.0, 1.0)
+    gap = np.linalg.norm(camera.eye - (a + along[:, None] * (b - a)), axis=1)
+    return bool(gap.min() >= EYE_CLEAR * float(np.linalg.norm(mesh.extent)))
 
 
 def eye_cell(mesh, camera, planes):
@@ -388,8 +409,8 @@ def draw(renderer, plan, data, texture):
         if walked is not None and start >= 0 and not walked[start]:
             start = -1       # the eye in a cell not walked: rays start at their first entry
     rare = dict(renderer.tables.get(f"tetra_walk_rare_paths:{EXITS_BY_TOPOLOGY}", mesh, make=rare_paths))
-    if start >= 0:
-        rare["WALK_TOPO"] = 0    # rays from an eye inside: the planes' rule (the topology needs a face in)
+    if start >= 0 and not eye_clear_of_edges(mesh, scene.camera, start):
+        rare["WALK_TOPO"] = 0    # an eye on an edge or a vertex: the planes' rule
     view = {**({"ORTHO": 1} if scene.camera.is_ortho else {}), "WALK_TOPO": rare["WALK_TOPO"]}
     compute = pixel_stage(renderer, plan.stage) == "compute"
     # the fragment stage's walk in place where the GL has image load/store (4.2)
