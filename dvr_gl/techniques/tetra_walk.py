@@ -67,7 +67,8 @@ other face that holds it; the walk leaves by that one, and the segment runs from
 the ray came in to where it crosses that face's plane (none where that crossing is not
 ahead: a sliver's crossings out of order, a zero-volume cell, a face the ray runs in).
 Rays through edges and vertices are ties, broken by a perturbation of the ray the same
-way in every cell (simulation of simplicity). So slivers, cells of zero volume and rays
+way in every cell (simulation of simplicity), towards the mesh's centre (so a ray in a
+boundary face of a convex part goes in, as projection leans it). So slivers, cells of zero volume and rays
 along faces need no rules of their own, and the walk cannot lose its way where the
 planes' float32 crossings disagree (Delaunay meshes of lattice points: 0.03 to 0.15 off
 before). Near an edge of a boundary face the entry pass, too, asks the signs.
@@ -435,9 +436,10 @@ def draw(renderer, plan, data, texture):
         "tetra/walk_entry.vert", "tetra/walk_entry.frag", dict(view, START_FACES=1), geometry="tetra/walk_entry.geom")
     for prog in (p for p in (entry_prog, pick_prog, start_prog) if p is not None):
         bind(prog, {}, {**cam, "u_target_size": scene.target_size, "u_inflate": grow_pixels(ctx),
-                        "u_start_margin": 1e-6 * float(np.linalg.norm(mesh.extent))})
+                        "u_centre": data.centre, "u_start_margin": 1e-6 * float(np.linalg.norm(mesh.extent))})
         prog["u_view_proj"].write(view_proj)
-    walk_uniforms = {**cam, "u_knot_count": plan.knots.count, "u_inv_unit": plan.knots.inv_unit,
+    walk_uniforms = {**cam, "u_centre": data.centre, "u_knot_count": plan.knots.count,
+                     "u_inv_unit": plan.knots.inv_unit,
                      "u_max_steps": max_steps(mesh), **clip_uniforms(scene)}
     if scene.shading or scene.illustration:
         walk_uniforms.update(sample_term_uniforms(renderer, scene, plan.defines))

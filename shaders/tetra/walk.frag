@@ -306,7 +306,7 @@ void PIXEL_MAIN() {
     // step (the rare steps' alone a quarter of the blunt fin's frame).
 #if WALK_TOPO
     vec3 across_x, across_y;
-    rayFrame(dir, across_x, across_y);
+    rayFrame(origin, dir, across_x, across_y);
     ivec3 face_ids;         // the face the ray came into `cell` by (walk_topo.glsl)
     vec4 face_s0, face_s1, face_s2;   // its corners across the ray (acrossRay)
     {

@@ -76,7 +76,7 @@ void main() {
     // and the walk's signs say the cell holds the ray (a start in a face shared by two
     // cells: the one the ties are broken towards)
     vec3 start_x, start_y;
-    rayFrame(dir, start_x, start_y);
+    rayFrame(origin, dir, start_x, start_y);
     if (!cellHoldsRay(texelFetch(t_tets, texelRow(cell), 0), origin, start_x, start_y)) discard;
 #endif
     frag_value = vec4(u_pick_cell ? float(cell) : 0.0, 0.0, 0.0, 1.0);
@@ -113,7 +113,7 @@ void main() {
     // it agrees holds the ray (a sliver's faces on the boundary, for one)
     if (inside <= margin) {
         vec3 across_x, across_y;
-        rayFrame(dir, across_x, across_y);
+        rayFrame(origin, dir, across_x, across_y);
         int k = v_slot - 4 * cell;
         ivec4 v = texelFetch(t_tets, texelRow(cell), 0);
         if (!faceHolds(ivec3(v[(k + 1) & 3], v[(k + 2) & 3], v[(k + 3) & 3]), origin, across_x, across_y)) discard;

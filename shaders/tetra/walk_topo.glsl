@@ -21,12 +21,21 @@
 uniform isampler2D t_tets;        // RGBA32I per cell: its four points (model.mesh.topology's order)
 uniform sampler2D t_points;       // RGBA32F per point: position relative to the mesh's lower corner
 
-// Two unit vectors across the ray (with dir, a right-handed frame)
-void rayFrame(vec3 dir, out vec3 across_x, out vec3 across_y) {
+uniform vec3 u_centre;            // the mean of the mesh's points (relative to its lower corner)
+
+// Two unit vectors across the ray, each turned to point towards the mesh's centre (where
+// it is not square to it): edgeSide's ties move the ray by e along the first and e^2
+// along the second, so a ray in a face on the boundary of a convex part goes in (as
+// tetra.frag leans such rays). They are built from the axis least along the ray, so
+// that a ray along an axis keeps exact zeros (its ties stay ties), and turned by sign.
+void rayFrame(vec3 origin, vec3 dir, out vec3 across_x, out vec3 across_y) {
     vec3 a = abs(dir);
     vec3 other = a.x <= a.y && a.x <= a.z ? vec3(1.0, 0.0, 0.0) : a.y <= a.z ? vec3(0.0, 1.0, 0.0) : vec3(0.0, 0.0, 1.0);
-    across_x = normalize(cross(dir, other));
-    across_y = cross(dir, across_x);
+    vec3 x = normalize(cross(dir, other));
+    vec3 y = cross(dir, x);
+    vec3 towards = u_centre - origin;
+    across_x = dot(towards, x) < 0.0 ? -x : x;
+    across_y = dot(towards, y) < 0.0 ? -y : y;
 }
 
 // Corner `id` seen along the ray: its position (x, y) in the plane across it, the ray at
