@@ -216,23 +216,39 @@ def test_lattice_delaunay_is_walked_by_its_topology(renderer):
     planes' rule lost whole rays here: RMSE 0.09 to 0.15, 200 to 570 pixels off by more
     than 0.01 at 80x80). By the topology every exit is decided once per edge, the same
     in every cell around it: GL within its bound of exact, no guard. And the unjittered
-    lattice seen along an axis, its rays in the planes of faces (ties); and the jittered
-    one from an eye inside it, clear of its cell's edges (the topology's exits too)."""
-    grid = np.stack(np.meshgrid(*[np.linspace(0.0, 1.0, 6)] * 3, indexing="ij"), -1).reshape(-1, 3)
-    jittered = grid + np.random.default_rng(5).normal(scale=1e-10, size=grid.shape)
-    for points, views in ((jittered, ((30, 20, False), (45, 35.264, True))), (grid, ((90, 0, True), (0, 0, False)))):
-        mesh = TetMesh.from_points(points, 0.5 + 0.3 * np.sin(6.3 * points[:, 0]) * np.cos(5.1 * points[:, 1])
-                                   + 0.2 * np.sin(3.9 * points[:, 2]))
+    lattice seen along an axis, its rays in the planes of faces (ties); the jittered one
+    from an eye inside it, clear of its cell's edges; and an 8^3 one from the centre of a
+    lattice cube, on an edge of five cells (each ray starts in one of them that holds it
+    by the signs: by the planes, 0.09 off)."""
+    def lattice(n):
+        axes = np.linspace(0.0, 1.0, n)
+        z, y, x = np.meshgrid(axes, axes, axes, indexing="ij")
+        points = np.stack([x, y, z], -1).reshape(-1, 3)
+        return points, points + np.random.default_rng(5).normal(size=points.shape) * 1e-10
+
+    def field(p):
+        return 0.5 + 0.3 * np.sin(6.3 * p[:, 0] + 0.3) * np.cos(5.1 * p[:, 1] - 0.2) + 0.2 * np.sin(3.9 * p[:, 2] + 0.5)
+
+    tf = TransferFunction(color=[(0.0, 0.2, 0.4, 0.9), (1.0, 0.9, 0.2, 0.1)], opacity=[(0.0, 0.1), (1.0, 0.8)],
+                          unit_distance=0.3)
+    grid, jittered = lattice(6)
+    _, jittered8 = lattice(8)
+    inside = Camera((0.43, 0.37, 0.61), (0.9, 0.5, 0.1), fov=70)
+    on_edge = Camera((0.5, 0.5, 0.5), (0.5, 0.5, -1.0), fov=70)
+    default = dvr_gl.default_camera
+    for points, views in ((jittered, [(30, 20, False), (45, 35.264, True), inside]),
+                          (grid, [(90, 0, True), (0, 0, False)]), (jittered8, [on_edge])):
+        mesh = TetMesh.from_points(points, field(points))
         assert tetra_walk.rare_paths(mesh)["WALK_TOPO"] == 1 and tetra_walk.walk_flat(mesh).sum() > 50
-        tf = TransferFunction(color=[(0.0, 0.2, 0.4, 0.9), (1.0, 0.9, 0.2, 0.1)], opacity=[(0.0, 0.1), (1.0, 0.8)],
-                              unit_distance=0.3)
-        cameras = [dvr_gl.default_camera(mesh, azimuth=az, elevation=el, ortho=ortho) for az, el, ortho in views]
-        if points is jittered:
-            inside = Camera((0.43, 0.37, 0.61), (0.9, 0.5, 0.1), fov=70)
-            cell = tetra_walk.eye_cell(mesh, inside, M.topology(mesh).cell_planes())
-            assert tetra_walk.eye_clear_of_edges(mesh, inside, cell)
-            cameras.append(inside)
-        for camera in cameras:
+        planes = M.topology(mesh).cell_planes()
+        for view in views:
+            camera = view if isinstance(view, Camera) else default(mesh, azimuth=view[0], elevation=view[1],
+                                                                      ortho=view[2])
+            if view is inside or view is on_edge:
+                flat = tetra_walk.walk_flat(mesh)
+                cell = walk_entries.eye_cell(mesh, camera, planes, flat)
+                assert walk_entries.eye_clear_of_edges(mesh, camera, cell) == (view is inside)
+                assert view is inside or len(walk_entries.cells_around_eye(mesh, camera, planes, cell, flat)) > 2
             scene = Scene(mesh, tf, camera, 48, 48)
             img, plan = walk(renderer, scene)
             assert np.abs(img - reference.exact(scene)).max() < GL_TOL
@@ -340,7 +356,8 @@ def test_ball_against_twin_exact_and_mpvo(renderer, view, mode):
     if mode in ("composite", "mip"):
         assert img[..., 3].max() > 0.2
     if view == "eye inside":
-        assert tetra_walk.eye_cell(scene.volume, scene.camera, M.topology(scene.volume).cell_planes()) >= 0
+        assert walk_entries.eye_cell(scene.volume, scene.camera, M.topology(scene.volume).cell_planes(),
+                                     tetra_walk.walk_flat(scene.volume)) >= 0
 
 
 @pytest.mark.parametrize("mode", ["mip", "average"])

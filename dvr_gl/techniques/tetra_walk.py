@@ -58,31 +58,30 @@ Per view, the CPU uploads a camera; then, per layer of depth peeling:
    behind it) or classified (mip, minip, average: ``tetra_classify.frag``).
 
 Exits by topology (``rare_paths``' WALK_TOPO, ``tetra/walk_topo.glsl``; every mesh
-without folded faces, but for a perspective eye on an edge or a vertex of its cell,
-``eye_clear_of_edges``): seen along the ray, every
-corner is a point of the plane across it, and which side of an edge the ray passes is
-the sign of an exact 2x2 determinant of its corners' rounded positions, the same in
-every cell around the edge. A cell entered by a face that holds the ray has exactly one
-other face that holds it; the walk leaves by that one, and the segment runs from where
-the ray came in to where it crosses that face's plane (none where that crossing is not
-ahead: a sliver's crossings out of order, a zero-volume cell, a face the ray runs in).
-Rays through edges and vertices are ties, broken by a perturbation of the ray the same
-way in every cell (simulation of simplicity), towards the mesh's centre (so a ray in a
-boundary face of a convex part goes in, as projection leans it). So slivers, cells of zero volume and rays
-along faces need no rules of their own, and the walk cannot lose its way where the
-planes' float32 crossings disagree (Delaunay meshes of lattice points: 0.03 to 0.15 off
-before). Near an edge of a boundary face the entry pass, too, asks the signs.
+without folded faces): seen along the ray, every corner is a point of the plane across
+it, and which side of an edge the ray passes is the sign of an exact 2x2 determinant of
+its corners' rounded positions, the same in every cell around the edge. A cell entered
+by a face that holds the ray has exactly one other face that holds it; the walk leaves
+by that one, and the segment runs from where the ray came in to where it crosses that
+face's plane (none where that crossing is not ahead: a sliver's crossings out of order,
+a zero-volume cell, a face the ray runs in). Rays through edges and vertices are ties,
+broken by a perturbation of the ray the same way in every cell (simulation of
+simplicity), towards the mesh's centre (so a ray in a boundary face of a convex part
+goes in, as projection leans it). So slivers, cells of zero volume and rays along faces
+need no rules of their own, and the walk cannot lose its way where the planes' float32
+crossings disagree (Delaunay meshes of lattice points: 0.03 to 0.15 off before). Near an
+edge of a boundary face the entry pass, too, asks the signs.
 
-Otherwise (folded faces, or an eye on an edge or a vertex), the planes decide: rays
-through edges and vertices take the first of tied leaving planes, the cells around the
-edge or vertex then passed with empty segments (each has one leaving plane at the tie).
-Zero-volume cells have planes without a side: the ray passes one through the face whose
-triangle holds its crossing, into a cell it enters there; cells too thin for float32 to
-order their crossings are passed as zero-volume ones (``walk_flat``). Folded cells (both
-cells of a face on one side of it): the walk never steps back across the face it came in
-by, a folded face is an entry face too, and a cell that offers no way on hands the ray
-to a folded neighbour that holds it further; the overlap is then counted once, as the
-exact image counts it.
+Otherwise (folded faces, or an eye on a vertex of more than ``walk_entries.EYE_CELLS``
+cells), the planes decide: rays through edges and vertices take the first of tied
+leaving planes, the cells around the edge or vertex then passed with empty segments
+(each has one leaving plane at the tie). Zero-volume cells have planes without a side:
+the ray passes one through the face whose triangle holds its crossing, into a cell it
+enters there; cells too thin for float32 to order their crossings are passed as
+zero-volume ones (``walk_flat``). Folded cells (both cells of a face on one side of it):
+the walk never steps back across the face it came in by, a folded face is an entry face
+too, and a cell that offers no way on hands the ray to a folded neighbour that holds it
+further; the overlap is then counted once, as the exact image counts it.
 
 Guards (a cycle made by rounding): more steps in a layer than the mesh has cells
 (``max_steps``), or 512 in a row that take the ray no further, end the ray, counted per
@@ -92,11 +91,14 @@ strictly after the last, so peeling cannot repeat an entry; it is bounded by
 ``TetraPlan.walk_left``, with a warning).
 
 A perspective eye inside the mesh: the cell that holds it is found on the CPU (float64,
-once per view), and the first layer starts every ray there (by the planes' rule where
-the eye is on an edge or a vertex of that cell: rays from it may miss the cell). An orthographic view whose
-start plane cuts the mesh: the faces of the cells it cuts (found per view, ``start_faces``)
-are drawn in the first entry pass too, each fragment taking t = 0 in its cell where its
-ray starts inside it. Not done: meshes of 2^24 cells or more (``WalkUnsupported``).
+once per view), and the first layer starts every ray there; where the eye lies on an
+edge or a vertex of that cell (``walk_entries.eye_clear_of_edges``), rays from it may
+miss the cell, and each starts in the first of the cells around the eye
+(``cells_around_eye``) that holds it by the topology's signs. An orthographic view whose
+start plane cuts the mesh: the faces of the cells it cuts (found per view,
+``start_faces``) are drawn in the first entry pass too, each fragment taking t = 0 in
+its cell where its ray starts inside it. Not done: meshes of 2^24 cells or more
+(``WalkUnsupported``).
 """
 
 from __future__ import annotations
@@ -111,8 +113,8 @@ from .common import (bind, camera_uniforms, clip_uniforms, data_projection, grow
 from .geometry import draw_surface_behind, surface_pass
 from .gpu import empty_vao, pixel_stage, rows_top_down
 from . import walk_entries
-from .walk_entries import (MARK_GAP, StartFaces, WalkTargets, depth_scale, entries, first_entries, layer_depth,
-                           mark_alive, start_faces)
+from .walk_entries import (EYE_CELLS, MARK_GAP, StartFaces, WalkTargets, cells_around_eye, depth_scale, entries,
+                           eye_cell, eye_clear_of_edges, first_entries, layer_depth, mark_alive, start_faces)
 
 MAX_PASSES = 256           # layers of depth peeling (entries along one ray) at most
 HIDDEN_FRACTION = 0.5      # walk only the cells the TF shows where it hides this share (walked_cells)
@@ -208,43 +210,6 @@ def max_steps(mesh):
     """The step guard of one layer's walk: a walk that makes progress meets each cell at
     most once, so more steps than cells can only be a cycle made by rounding."""
     return int(mesh.n_tets) + 4
-
-
-EYE_CLEAR = 1e-5           # the eye this share of the diagonal off its cell's edges: the topology's exits
-
-
-def eye_clear_of_edges(mesh, camera, cell):
-    """Whether a perspective eye in ``cell`` lies at least ``EYE_CLEAR`` of the mesh's
-    diagonal off each of its edges: every line through it then meets the cell (on a face
-    too: behind or ahead), so the topology's signs hold each ray in the cell and the walk
-    may leave by them (walk_topo.glsl). Rays from an eye on an edge or a vertex start in
-    the cell that holds the eye but may, by the signs, miss it."""
-    topo = topology(mesh)
-    corners = mesh.points[topo.tets[cell]]
-    pairs = [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)]
-    a = corners[[i for i, _ in pairs]]
-    b = corners[[j for _, j in pairs]]
-    along = np.clip(np.einsum("ij,ij->i", camera.eye - a, b - a) / np.maximum(np.einsum("ij,ij->i", b - a, b - a),
-                                                                               1e-300), 0.0, 1.0)
-    gap = np.linalg.norm(camera.eye - (a + along[:, None] * (b - a)), axis=1)
-    return bool(gap.min() >= EYE_CLEAR * float(np.linalg.norm(mesh.extent)))
-
-
-def eye_cell(mesh, camera, planes):
-    """The first cell (not of zero volume) that holds a perspective eye, or -1: float64,
-    the cells' own planes (``planes``: topology.cell_planes())."""
-    lo, hi = mesh.bounds
-    if camera.is_ortho or np.any(camera.eye < lo) or np.any(camera.eye > hi):
-        return -1
-    eye = camera.eye - lo
-    flat = walk_flat(mesh)
-    for start in range(0, len(planes), 1 << 18):
-        chunk = planes[start:start + (1 << 18)]
-        room = chunk[..., 3] - chunk[..., :3] @ eye
-        inside = (room >= 0.0).all(axis=1) & ~flat[start:start + len(chunk)]
-        if inside.any():
-            return int(start + np.flatnonzero(inside)[0])
-    return -1
 
 
 HULL = -2                  # neighbours(hull=True): across a boundary face on the convex hull
@@ -406,12 +371,16 @@ def draw(renderer, plan, data, texture):
     if not scene.camera.is_ortho:
         planes = renderer.tables.get("tetra_walk_planes", mesh, make=lambda m: topology(m).cell_planes())
         start = renderer.tables.get("tetra_walk_eye_cell", mesh, scene.camera,
-                                    make=lambda m, cam: eye_cell(m, cam, planes))
+                                    make=lambda m, cam: eye_cell(m, cam, planes, walk_flat(m)))
         if walked is not None and start >= 0 and not walked[start]:
             start = -1       # the eye in a cell not walked: rays start at their first entry
     rare = dict(renderer.tables.get(f"tetra_walk_rare_paths:{EXITS_BY_TOPOLOGY}", mesh, make=rare_paths))
-    if start >= 0 and not eye_clear_of_edges(mesh, scene.camera, start):
-        rare["WALK_TOPO"] = 0    # an eye on an edge or a vertex: the planes' rule
+    around = np.zeros(0, np.int32)       # the cells around an eye on an edge or a vertex
+    if start >= 0 and rare["WALK_TOPO"] and not eye_clear_of_edges(mesh, scene.camera, start):
+        around = renderer.tables.get("tetra_walk_eye_cells", mesh, scene.camera,
+                                     make=lambda m, cam: cells_around_eye(m, cam, planes, start, walk_flat(m)))
+        if around is None:
+            rare["WALK_TOPO"] = 0        # more than walk.frag takes: the planes' rule
     view = {**({"ORTHO": 1} if scene.camera.is_ortho else {}), "WALK_TOPO": rare["WALK_TOPO"]}
     compute = pixel_stage(renderer, plan.stage) == "compute"
     # the fragment stage's walk in place where the GL has image load/store (4.2)
@@ -514,6 +483,9 @@ def draw(renderer, plan, data, texture):
             targets.acc[src].bind_to_image(0, read=True, write=True)
             targets.state[src].bind_to_image(1, read=True, write=True)
         bind(walk_prog, textures, {**walk_uniforms, "u_start_cell": start if first_from_eye else -1,
+                                   "u_start_count": len(around) if first_from_eye and around is not None else 0,
+                                   "u_start_cells": np.resize(around if around is not None and len(around) else
+                                                              np.zeros(1, np.int32), EYE_CELLS).astype("i4").tobytes(),
                                    "u_acc_image": 0, "u_state_image": 1})
         if compute:
             targets.acc[dst].bind_to_image(0, read=False, write=True)

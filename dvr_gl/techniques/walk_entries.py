@@ -1,7 +1,8 @@
 """The cell walk's entry passes (``techniques.tetra_walk``; shaders tetra/walk_entry.*,
 tetra/walk_mark.frag): per layer of depth peeling, each pixel's nearest entry into the
 walked cells beyond where its last walk stopped, t and cell, and the marks of the pixels
-that have one; the per-image targets they and the walk draw into."""
+that have one; the per-image targets they and the walk draw into; and where rays from
+an eye inside the mesh start (``eye_cell``, ``cells_around_eye``)."""
 
 from __future__ import annotations
 
@@ -241,3 +242,59 @@ def first_entries(ctx, prog, faces, data, flags, targets, src, query, count, mar
     finally:
         ctx.disable(ctx.DEPTH_TEST)
         ctx.depth_func = "<"
+
+
+EYE_CLEAR = 1e-5           # the eye this share of the diagonal off its cell's edges: the topology's exits
+
+
+def eye_clear_of_edges(mesh, camera, cell):
+    """Whether a perspective eye in ``cell`` lies at least ``EYE_CLEAR`` of the mesh's
+    diagonal off each of its edges: every line through it then meets the cell (on a face
+    too: behind or ahead), so the topology's signs hold each ray in the cell and the walk
+    may leave by them (walk_topo.glsl). Rays from an eye on an edge or a vertex start in
+    the cell that holds the eye but may, by the signs, miss it."""
+    topo = topology(mesh)
+    corners = mesh.points[topo.tets[cell]]
+    pairs = [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)]
+    a = corners[[i for i, _ in pairs]]
+    b = corners[[j for _, j in pairs]]
+    along = np.clip(np.einsum("ij,ij->i", camera.eye - a, b - a) / np.maximum(np.einsum("ij,ij->i", b - a, b - a),
+                                                                               1e-300), 0.0, 1.0)
+    gap = np.linalg.norm(camera.eye - (a + along[:, None] * (b - a)), axis=1)
+    return bool(gap.min() >= EYE_CLEAR * float(np.linalg.norm(mesh.extent)))
+
+
+EYE_CELLS = 64             # the cells around an eye on an edge or a vertex at most (tetra/walk.frag: u_start_cells)
+
+
+def cells_around_eye(mesh, camera, planes, cell, flat):
+    """int32 array: the cells (not ``flat``: tetra_walk.walk_flat) that hold a perspective eye to within
+    ``EYE_CLEAR`` of the mesh's diagonal (those around the edge or vertex it lies on),
+    ``cell`` first; None where they are more than ``EYE_CELLS``. Each ray from the eye
+    starts in the first of them that holds it by the topology's signs (walk.frag)."""
+    eye = camera.eye - mesh.bounds[0]
+    margin = EYE_CLEAR * float(np.linalg.norm(mesh.extent))
+    found = [np.array([cell])]
+    for start in range(0, len(planes), 1 << 18):
+        chunk = planes[start:start + (1 << 18)]
+        hold = ((chunk[..., 3] - chunk[..., :3] @ eye) >= -margin).all(axis=1) & ~flat[start:start + len(chunk)]
+        found.append(start + np.flatnonzero(hold))
+    cells = np.concatenate(found)
+    cells = cells[np.sort(np.unique(cells, return_index=True)[1])]
+    return cells.astype(np.int32) if len(cells) <= EYE_CELLS else None
+
+
+def eye_cell(mesh, camera, planes, flat):
+    """The first cell (not ``flat``: tetra_walk.walk_flat) that holds a perspective eye,
+    or -1: float64, the cells' own planes (``planes``: topology.cell_planes())."""
+    lo, hi = mesh.bounds
+    if camera.is_ortho or np.any(camera.eye < lo) or np.any(camera.eye > hi):
+        return -1
+    eye = camera.eye - lo
+    for start in range(0, len(planes), 1 << 18):
+        chunk = planes[start:start + (1 << 18)]
+        room = chunk[..., 3] - chunk[..., :3] @ eye
+        inside = (room >= 0.0).all(axis=1) & ~flat[start:start + len(chunk)]
+        if inside.any():
+            return int(start + np.flatnonzero(inside)[0])
+    return -1

@@ -107,6 +107,12 @@ uniform sampler2D t_state;        // the previous pass's state (tetra/walk_entry
 uniform sampler2D t_entry_t;      // the entry pass: nearest eligible entry t (3e38: none)
 uniform sampler2D t_entry_cell;   // and its cell
 uniform int u_start_cell;         // >= 0: every ray starts in this cell at t = 0
+#if WALK_TOPO
+// an eye on an edge or a vertex: each ray starts in the first of these cells that holds
+// it by the topology's signs (tetra_walk.cells_around_eye; EYE_CELLS: 64)
+uniform int u_start_cells[64];
+uniform int u_start_count;
+#endif
 // t_tets, t_points; the topology's exits (WALK_TOPO)
 #include "tetra/walk_topo.glsl"
 uniform int u_max_steps;
@@ -309,6 +315,12 @@ void PIXEL_MAIN() {
     rayFrame(origin, dir, across_x, across_y);
     ivec3 face_ids;         // the face the ray came into `cell` by (walk_topo.glsl)
     vec4 face_s0, face_s1, face_s2;   // its corners across the ray (acrossRay)
+    for (int i = 0; i < u_start_count; ++i) {
+        if (cellHoldsRay(texelFetch(t_tets, texelRow(u_start_cells[i]), 0), origin, across_x, across_y)) {
+            cell = u_start_cells[i];
+            break;
+        }
+    }
     {
         mat3x4 normals;
         vec4 room_at_eye, along, room, t;
