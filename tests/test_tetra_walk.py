@@ -217,9 +217,9 @@ def test_lattice_delaunay_is_walked_by_its_topology(renderer):
     than 0.01 at 80x80). By the topology every exit is decided once per edge, the same
     in every cell around it: GL within its bound of exact, no guard. And the unjittered
     lattice seen along an axis, its rays in the planes of faces (ties); the jittered one
-    from an eye inside it, clear of its cell's edges; and an 8^3 one from the centre of a
-    lattice cube, on an edge of five cells (each ray starts in one of them that holds it
-    by the signs: by the planes, 0.09 off)."""
+    from an eye inside it, clear of its cell's faces, and on a face; and an 8^3 one from
+    the centre of a lattice cube, on an edge of five cells (each ray starts in one of
+    them that holds it by the signs: by the planes, 0.09 off)."""
     def lattice(n):
         axes = np.linspace(0.0, 1.0, n)
         z, y, x = np.meshgrid(axes, axes, axes, indexing="ij")
@@ -233,10 +233,11 @@ def test_lattice_delaunay_is_walked_by_its_topology(renderer):
                           unit_distance=0.3)
     grid, jittered = lattice(6)
     _, jittered8 = lattice(8)
-    inside = Camera((0.43, 0.37, 0.61), (0.9, 0.5, 0.1), fov=70)
+    inside = Camera((0.47, 0.33, 0.55), (0.9, 0.5, 0.1), fov=70)
+    on_face = Camera((0.43, 0.37, 0.61), (0.9, 0.5, 0.1), fov=70)     # x + y = 0.8: a plane of faces
     on_edge = Camera((0.5, 0.5, 0.5), (0.5, 0.5, -1.0), fov=70)
     default = dvr_gl.default_camera
-    for points, views in ((jittered, [(30, 20, False), (45, 35.264, True), inside]),
+    for points, views in ((jittered, [(30, 20, False), (45, 35.264, True), inside, on_face]),
                           (grid, [(90, 0, True), (0, 0, False)]), (jittered8, [on_edge])):
         mesh = TetMesh.from_points(points, field(points))
         assert tetra_walk.rare_paths(mesh)["WALK_TOPO"] == 1 and tetra_walk.walk_flat(mesh).sum() > 50
@@ -244,11 +245,11 @@ def test_lattice_delaunay_is_walked_by_its_topology(renderer):
         for view in views:
             camera = view if isinstance(view, Camera) else default(mesh, azimuth=view[0], elevation=view[1],
                                                                       ortho=view[2])
-            if view is inside or view is on_edge:
+            if isinstance(view, Camera):
                 flat = tetra_walk.walk_flat(mesh)
                 cell = walk_entries.eye_cell(mesh, camera, planes, flat)
-                assert walk_entries.eye_clear_of_edges(mesh, camera, cell) == (view is inside)
-                assert view is inside or len(walk_entries.cells_around_eye(mesh, camera, planes, cell, flat)) > 2
+                assert walk_entries.eye_clear_of_faces(mesh, camera, planes, cell) == (view is inside)
+                assert view is inside or len(walk_entries.cells_around_eye(mesh, camera, planes, cell, flat)) >= 2
             scene = Scene(mesh, tf, camera, 48, 48)
             img, plan = walk(renderer, scene)
             assert np.abs(img - reference.exact(scene)).max() < GL_TOL

@@ -91,10 +91,11 @@ strictly after the last, so peeling cannot repeat an entry; it is bounded by
 ``TetraPlan.walk_left``, with a warning).
 
 A perspective eye inside the mesh: the cell that holds it is found on the CPU (float64,
-once per view), and the first layer starts every ray there; where the eye lies on an
-edge or a vertex of that cell (``walk_entries.eye_clear_of_edges``), rays from it may
-miss the cell, and each starts in the first of the cells around the eye
-(``cells_around_eye``) that holds it by the topology's signs. An orthographic view whose
+once per view), and the first layer starts every ray there; where the eye lies on a
+face, an edge or a vertex of that cell (``walk_entries.eye_clear_of_faces``), rays from
+it may miss the cell, and each starts in the first of the cells around the eye
+(``cells_around_eye``) that holds it by the topology's signs (none: an eye on the
+boundary, the ray going out, which may enter again in the next layer). An orthographic view whose
 start plane cuts the mesh: the faces of the cells it cuts (found per view,
 ``start_faces``) are drawn in the first entry pass too, each fragment taking t = 0 in
 its cell where its ray starts inside it. Not done: meshes of 2^24 cells or more
@@ -114,7 +115,7 @@ from .geometry import draw_surface_behind, surface_pass
 from .gpu import empty_vao, pixel_stage, rows_top_down
 from . import walk_entries
 from .walk_entries import (EYE_CELLS, MARK_GAP, StartFaces, WalkTargets, cells_around_eye, depth_scale, entries,
-                           eye_cell, eye_clear_of_edges, first_entries, layer_depth, mark_alive, start_faces)
+                           eye_cell, eye_clear_of_faces, first_entries, layer_depth, mark_alive, start_faces)
 
 MAX_PASSES = 256           # layers of depth peeling (entries along one ray) at most
 HIDDEN_FRACTION = 0.5      # walk only the cells the TF shows where it hides this share (walked_cells)
@@ -204,6 +205,13 @@ def rare_paths(mesh):
     folds = int(folded_faces(mesh).any())
     return {"WALK_FLAT": int(walk_flat(mesh).any()), "WALK_FOLDS": folds,
             "WALK_TOPO": int(EXITS_BY_TOPOLOGY and not folds)}
+
+
+def exact_products(ctx):
+    """Whether the GL keeps `precise` arithmetic (GL_ARB_gpu_shader5, core in 4.0): the
+    topology's exact products (walk_topo.glsl) split floats in a way a compiler free to
+    fold and fuse would undo. Without it the walk takes the planes' rule."""
+    return ctx.version_code >= 400 or "GL_ARB_gpu_shader5" in ctx.extensions
 
 
 def max_steps(mesh):
@@ -375,8 +383,10 @@ def draw(renderer, plan, data, texture):
         if walked is not None and start >= 0 and not walked[start]:
             start = -1       # the eye in a cell not walked: rays start at their first entry
     rare = dict(renderer.tables.get(f"tetra_walk_rare_paths:{EXITS_BY_TOPOLOGY}", mesh, make=rare_paths))
+    if not exact_products(ctx):
+        rare["WALK_TOPO"] = 0    # the topology's signs need arithmetic the compiler leaves as written
     around = np.zeros(0, np.int32)       # the cells around an eye on an edge or a vertex
-    if start >= 0 and rare["WALK_TOPO"] and not eye_clear_of_edges(mesh, scene.camera, start):
+    if start >= 0 and rare["WALK_TOPO"] and not eye_clear_of_faces(mesh, scene.camera, planes, start):
         around = renderer.tables.get("tetra_walk_eye_cells", mesh, scene.camera,
                                      make=lambda m, cam: cells_around_eye(m, cam, planes, start, walk_flat(m)))
         if around is None:
@@ -407,7 +417,8 @@ def draw(renderer, plan, data, texture):
         bind(prog, {}, {**cam, "u_target_size": scene.target_size, "u_inflate": grow_pixels(ctx),
                         "u_centre": data.centre, "u_start_margin": 1e-6 * float(np.linalg.norm(mesh.extent))})
         prog["u_view_proj"].write(view_proj)
-    walk_uniforms = {**cam, "u_centre": data.centre, "u_knot_count": plan.knots.count,
+    walk_uniforms = {**cam, "u_centre": data.centre, "u_reach": float(np.linalg.norm(mesh.extent)),
+                     "u_knot_count": plan.knots.count,
                      "u_inv_unit": plan.knots.inv_unit,
                      "u_max_steps": max_steps(mesh), **clip_uniforms(scene)}
     if scene.shading or scene.illustration:

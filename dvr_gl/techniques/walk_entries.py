@@ -244,34 +244,29 @@ def first_entries(ctx, prog, faces, data, flags, targets, src, query, count, mar
         ctx.depth_func = "<"
 
 
-EYE_CLEAR = 1e-5           # the eye this share of the diagonal off its cell's edges: the topology's exits
+EYE_CLEAR = 1e-5           # the eye this share of the diagonal inside its cell's faces: it holds every ray
 
 
-def eye_clear_of_edges(mesh, camera, cell):
+def eye_clear_of_faces(mesh, camera, planes, cell):
     """Whether a perspective eye in ``cell`` lies at least ``EYE_CLEAR`` of the mesh's
-    diagonal off each of its edges: every line through it then meets the cell (on a face
-    too: behind or ahead), so the topology's signs hold each ray in the cell and the walk
-    may leave by them (walk_topo.glsl). Rays from an eye on an edge or a vertex start in
-    the cell that holds the eye but may, by the signs, miss it."""
-    topo = topology(mesh)
-    corners = mesh.points[topo.tets[cell]]
-    pairs = [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)]
-    a = corners[[i for i, _ in pairs]]
-    b = corners[[j for _, j in pairs]]
-    along = np.clip(np.einsum("ij,ij->i", camera.eye - a, b - a) / np.maximum(np.einsum("ij,ij->i", b - a, b - a),
-                                                                               1e-300), 0.0, 1.0)
-    gap = np.linalg.norm(camera.eye - (a + along[:, None] * (b - a)), axis=1)
-    return bool(gap.min() >= EYE_CLEAR * float(np.linalg.norm(mesh.extent)))
+    diagonal inside each of its face planes (``planes``: topology.cell_planes()): every
+    line through it then crosses the cell, so the topology's signs hold each ray in the
+    cell (walk_topo.glsl). Rays from an eye on a face, an edge or a vertex may, by the
+    signs, miss the cell that holds the eye (those in the plane of that face, for one)."""
+    eye = camera.eye - mesh.bounds[0]
+    room = planes[cell, :, 3] - planes[cell, :, :3] @ eye
+    return bool(room.min() >= EYE_CLEAR * float(np.linalg.norm(mesh.extent)))
 
 
 EYE_CELLS = 64             # the cells around an eye on an edge or a vertex at most (tetra/walk.frag: u_start_cells)
 
 
 def cells_around_eye(mesh, camera, planes, cell, flat):
-    """int32 array: the cells (not ``flat``: tetra_walk.walk_flat) that hold a perspective eye to within
-    ``EYE_CLEAR`` of the mesh's diagonal (those around the edge or vertex it lies on),
-    ``cell`` first; None where they are more than ``EYE_CELLS``. Each ray from the eye
-    starts in the first of them that holds it by the topology's signs (walk.frag)."""
+    """int32 array: the cells (not ``flat``: tetra_walk.walk_flat, whose planes are one)
+    that hold a perspective eye to within ``EYE_CLEAR`` of the mesh's diagonal (those
+    around the face, edge or vertex it lies on), ``cell`` first; None where they are more
+    than ``EYE_CELLS``. Each ray from the eye starts in the first of them that holds it
+    by the topology's signs (walk.frag)."""
     eye = camera.eye - mesh.bounds[0]
     margin = EYE_CLEAR * float(np.linalg.norm(mesh.extent))
     found = [np.array([cell])]

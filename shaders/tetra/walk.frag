@@ -112,6 +112,7 @@ uniform int u_start_cell;         // >= 0: every ray starts in this cell at t = 
 // it by the topology's signs (tetra_walk.cells_around_eye; EYE_CELLS: 64)
 uniform int u_start_cells[64];
 uniform int u_start_count;
+uniform float u_reach;            // the mesh's diagonal: no segment is longer
 #endif
 // t_tets, t_points; the topology's exits (WALK_TOPO)
 #include "tetra/walk_topo.glsl"
@@ -315,11 +316,17 @@ void PIXEL_MAIN() {
     rayFrame(origin, dir, across_x, across_y);
     ivec3 face_ids;         // the face the ray came into `cell` by (walk_topo.glsl)
     vec4 face_s0, face_s1, face_s2;   // its corners across the ray (acrossRay)
+    bool start_held = u_start_count == 0;
     for (int i = 0; i < u_start_count; ++i) {
         if (cellHoldsRay(texelFetch(t_tets, texelRow(u_start_cells[i]), 0), origin, across_x, across_y)) {
             cell = u_start_cells[i];
+            start_held = true;
             break;
         }
+    }
+    if (!start_held) {            // an eye on the boundary, the ray going out: left at the eye
+        frag_state = vec4(0.0, -1.0, state.z, state.w);
+        return;
     }
     {
         mat3x4 normals;
@@ -379,11 +386,14 @@ void PIXEL_MAIN() {
                 // crossing is not ahead (a sliver's crossings out of order, a zero-volume
                 // cell) or the ray nearly in the face's plane (its crossing
                 // ill-conditioned): the next cell's segment then starts at t_cur, and its
-                // field is this one's on the face between them.
+                // field is this one's on the face between them. Out of the walked cells
+                // no next cell takes that stretch: this one does, as far as the mesh reaches.
                 int face = topoExit(cell, origin, across_x, across_y, face_ids, face_s0, face_s1, face_s2);
                 float along_face;
                 float t_face = faceCrossing(4 * cell + face, u_eye, origin, dir, along_face);
-                float t_end = along_face > GRAZING && t_face > t_cur ? t_face : t_cur;
+                next = nb[face];
+                bool ends_here = along_face > GRAZING || (next < 0 && along_face > 0.0 && t_face - t_cur <= u_reach);
+                float t_end = t_face > t_cur && ends_here ? t_face : t_cur;
                 a = max(t_cur, kept.x);
                 b = min(t_end, kept.y);
                 if (b > a && (MODE_COMPOSITE == 0 || (flags & SHOWN) != 0u)) {
@@ -392,7 +402,6 @@ void PIXEL_MAIN() {
                 }
                 stalled = t_end > t_cur ? 0 : stalled + 1;
                 t_cur = max(t_cur, t_end);
-                next = nb[face];
                 if (next == HULL && along_face > HULL_ALONG) done = true;   // no re-entry: no next layer
                 if (t_cur >= kept.y) {
                     done = true;

@@ -31,11 +31,14 @@ uniform vec3 u_centre;            // the mean of the mesh's points (relative to 
 void rayFrame(vec3 origin, vec3 dir, out vec3 across_x, out vec3 across_y) {
     vec3 a = abs(dir);
     vec3 other = a.x <= a.y && a.x <= a.z ? vec3(1.0, 0.0, 0.0) : a.y <= a.z ? vec3(0.0, 1.0, 0.0) : vec3(0.0, 0.0, 1.0);
-    vec3 x = normalize(cross(dir, other));
-    vec3 y = cross(dir, x);
-    vec3 towards = u_centre - origin;
-    across_x = dot(towards, x) < 0.0 ? -x : x;
-    across_y = dot(towards, y) < 0.0 ? -y : y;
+    // PRECISE: the entry passes and the walk, compiled apart, build it bit for bit alike
+    PRECISE vec3 x = normalize(cross(dir, other));
+    PRECISE vec3 y = cross(dir, x);
+    PRECISE vec3 towards = u_centre - origin;
+    PRECISE float towards_x = dot(towards, x);
+    PRECISE float towards_y = dot(towards, y);
+    across_x = towards_x < 0.0 ? -x : x;
+    across_y = towards_y < 0.0 ? -y : y;
 }
 
 // Corner `id` seen along the ray: its position (x, y) in the plane across it, the ray at
