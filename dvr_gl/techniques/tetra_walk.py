@@ -385,12 +385,14 @@ def draw(renderer, plan, data, texture):
     rare = dict(renderer.tables.get(f"tetra_walk_rare_paths:{EXITS_BY_TOPOLOGY}", mesh, make=rare_paths))
     if not exact_products(ctx):
         rare["WALK_TOPO"] = 0    # the topology's signs need arithmetic the compiler leaves as written
-    around = np.zeros(0, np.int32)       # the cells around an eye on an edge or a vertex
+    around = None                        # the cells around an eye on a face, an edge or a vertex
     if start >= 0 and rare["WALK_TOPO"] and not eye_clear_of_faces(mesh, scene.camera, planes, start):
         around = renderer.tables.get("tetra_walk_eye_cells", mesh, scene.camera,
                                      make=lambda m, cam: cells_around_eye(m, cam, planes, start, walk_flat(m)))
         if around is None:
             rare["WALK_TOPO"] = 0        # more than walk.frag takes: the planes' rule
+    around = np.zeros(0, np.int32) if around is None else around
+    start_cells = np.resize(np.append(around, 0), EYE_CELLS).astype("i4").tobytes()
     view = {**({"ORTHO": 1} if scene.camera.is_ortho else {}), "WALK_TOPO": rare["WALK_TOPO"]}
     compute = pixel_stage(renderer, plan.stage) == "compute"
     # the fragment stage's walk in place where the GL has image load/store (4.2)
@@ -494,9 +496,8 @@ def draw(renderer, plan, data, texture):
             targets.acc[src].bind_to_image(0, read=True, write=True)
             targets.state[src].bind_to_image(1, read=True, write=True)
         bind(walk_prog, textures, {**walk_uniforms, "u_start_cell": start if first_from_eye else -1,
-                                   "u_start_count": len(around) if first_from_eye and around is not None else 0,
-                                   "u_start_cells": np.resize(around if around is not None and len(around) else
-                                                              np.zeros(1, np.int32), EYE_CELLS).astype("i4").tobytes(),
+                                   "u_start_count": len(around) if first_from_eye else 0,
+                                   "u_start_cells": start_cells,
                                    "u_acc_image": 0, "u_state_image": 1})
         if compute:
             targets.acc[dst].bind_to_image(0, read=False, write=True)

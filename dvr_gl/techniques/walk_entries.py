@@ -267,14 +267,8 @@ def cells_around_eye(mesh, camera, planes, cell, flat):
     around the face, edge or vertex it lies on), ``cell`` first; None where they are more
     than ``EYE_CELLS``. Each ray from the eye starts in the first of them that holds it
     by the topology's signs (walk.frag)."""
-    eye = camera.eye - mesh.bounds[0]
     margin = EYE_CLEAR * float(np.linalg.norm(mesh.extent))
-    found = [np.array([cell])]
-    for start in range(0, len(planes), 1 << 18):
-        chunk = planes[start:start + (1 << 18)]
-        hold = ((chunk[..., 3] - chunk[..., :3] @ eye) >= -margin).all(axis=1) & ~flat[start:start + len(chunk)]
-        found.append(start + np.flatnonzero(hold))
-    cells = np.concatenate(found)
+    cells = np.concatenate([[cell], *_cells_holding(mesh, camera, planes, flat, margin)])
     cells = cells[np.sort(np.unique(cells, return_index=True)[1])]
     return cells.astype(np.int32) if len(cells) <= EYE_CELLS else None
 
@@ -285,11 +279,17 @@ def eye_cell(mesh, camera, planes, flat):
     lo, hi = mesh.bounds
     if camera.is_ortho or np.any(camera.eye < lo) or np.any(camera.eye > hi):
         return -1
-    eye = camera.eye - lo
+    for cells in _cells_holding(mesh, camera, planes, flat, 0.0):
+        if len(cells):
+            return int(cells[0])
+    return -1
+
+
+def _cells_holding(mesh, camera, planes, flat, margin):
+    """The cells, not ``flat``, inside each of whose planes the eye lies to within
+    ``margin``: one array per chunk of cells, in order (memory stays bounded)."""
+    eye = camera.eye - mesh.bounds[0]
     for start in range(0, len(planes), 1 << 18):
         chunk = planes[start:start + (1 << 18)]
-        room = chunk[..., 3] - chunk[..., :3] @ eye
-        inside = (room >= 0.0).all(axis=1) & ~flat[start:start + len(chunk)]
-        if inside.any():
-            return int(start + np.flatnonzero(inside)[0])
-    return -1
+        hold = ((chunk[..., 3] - chunk[..., :3] @ eye) >= -margin).all(axis=1) & ~flat[start:start + len(chunk)]
+        yield start + np.flatnonzero(hold)

@@ -333,7 +333,7 @@ void PIXEL_MAIN() {
         vec4 room_at_eye, along, room, t;
         cellPlanes(cell, u_eye, normals, room_at_eye);
         cellCrossings(normals, room_at_eye, origin, dir, u_eye, along, room, t);
-        startFace(cell, texelFetch(t_neighbours, texelRow(cell), 0), u_start_cell >= 0 || t_cur <= 0.0 ? -3 : -1,
+        startFace(cell, texelFetch(t_neighbours, texelRow(cell), 0), u_start_cell < 0 && t_cur > 0.0,
                   origin, across_x, across_y, along, face_ids, face_s0, face_s1, face_s2);
     }
 #endif

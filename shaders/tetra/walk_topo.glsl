@@ -80,6 +80,12 @@ float edgeSide(int ia, vec4 a, int ib, vec4 b) {
     return det != 0.0 ? det : down != 0.0 ? down : right != 0.0 ? right : ia < ib ? 1.0 : -1.0;
 }
 
+// A face's three edge sides (edgeSide, in the face's order): +1 where the ray is on the
+// left of all three, -1 on the right of all three, 0 where the face does not hold it
+float holding(vec3 sides) {
+    return all(greaterThan(sides, vec3(0.0))) ? 1.0 : all(lessThan(sides, vec3(0.0))) ? -1.0 : 0.0;
+}
+
 // Per local face k of a cell with corners v at q[0..3] (acrossRay): +1 where the ray is
 // on the left of the face's edges in the order (k+1, k+2, k+3), -1 on their right, 0
 // where the face does not hold the ray
@@ -89,13 +95,8 @@ vec4 facesHolding(ivec4 v, vec4 q[4]) {
     float e03 = edgeSide(v.x, q[0], v.w, q[3]), e12 = edgeSide(v.y, q[1], v.z, q[2]);
     float e13 = edgeSide(v.y, q[1], v.w, q[3]), e23 = edgeSide(v.z, q[2], v.w, q[3]);
     // face k's edges in the order (k+1, k+2, k+3): 0: 12 23 31; 1: 23 30 02; 2: 30 01 13; 3: 01 12 20
-    vec3 f0 = vec3(e12, e23, -e13), f1 = vec3(e23, -e03, e02), f2 = vec3(-e03, e01, e13), f3 = vec3(e01, e12, -e02);
-    vec4 held;
-    held.x = all(greaterThan(f0, vec3(0.0))) ? 1.0 : all(lessThan(f0, vec3(0.0))) ? -1.0 : 0.0;
-    held.y = all(greaterThan(f1, vec3(0.0))) ? 1.0 : all(lessThan(f1, vec3(0.0))) ? -1.0 : 0.0;
-    held.z = all(greaterThan(f2, vec3(0.0))) ? 1.0 : all(lessThan(f2, vec3(0.0))) ? -1.0 : 0.0;
-    held.w = all(greaterThan(f3, vec3(0.0))) ? 1.0 : all(lessThan(f3, vec3(0.0))) ? -1.0 : 0.0;
-    return held;
+    return vec4(holding(vec3(e12, e23, -e13)), holding(vec3(e23, -e03, e02)), holding(vec3(-e03, e01, e13)),
+                holding(vec3(e01, e12, -e02)));
 }
 
 void cellAcrossRay(ivec4 v, vec3 origin, vec3 across_x, vec3 across_y, out vec4 q[4]) {
@@ -117,20 +118,19 @@ bool faceHolds(ivec3 ids, vec3 origin, vec3 across_x, vec3 across_y) {
     vec4 a = acrossRay(ids.x, origin, across_x, across_y);
     vec4 b = acrossRay(ids.y, origin, across_x, across_y);
     vec4 c = acrossRay(ids.z, origin, across_x, across_y);
-    float ab = edgeSide(ids.x, a, ids.y, b), bc = edgeSide(ids.y, b, ids.z, c), ca = edgeSide(ids.z, c, ids.x, a);
-    return (ab > 0.0 && bc > 0.0 && ca > 0.0) || (ab < 0.0 && bc < 0.0 && ca < 0.0);
+    return holding(vec3(edgeSide(ids.x, a, ids.y, b), edgeSide(ids.y, b, ids.z, c), edgeSide(ids.z, c, ids.x, a))) != 0.0;
 }
 
 // The face of `cell` the ray came in by, its corners in `ids` and their positions across
 // the ray (s0, s1, s2: acrossRay), ordered so that the ray is on the left of each edge
 // ids[k] -> ids[k+1]. Of the faces that hold the ray (two, in a cell that holds it): one
-// across which lies `from` (-1: the boundary, for a ray from the entry pass; -3: none,
-// for a ray that starts inside the cell), then the one
-// the ray goes into the cell by (the least `along`, the rate outwards: a face whose
-// plane holds the ray may hold it by the signs too). A zero-volume cell on the boundary
+// on the boundary where the ray comes from the entry pass (`from_boundary`; not for a
+// ray that starts inside the cell), then the one the ray goes into the cell by (the
+// least `along`, the rate outwards: a face whose plane holds the ray may hold it by the
+// signs too). A zero-volume cell on the boundary
 // holds the ray in two faces, the boundary's and the inside's, whose planes are one.
 // Where no face holds it (the start's cell chosen by its planes), the best of the others.
-void startFace(int cell, ivec4 nb, int from, vec3 origin, vec3 across_x, vec3 across_y, vec4 along,
+void startFace(int cell, ivec4 nb, bool from_boundary, vec3 origin, vec3 across_x, vec3 across_y, vec4 along,
                out ivec3 ids, out vec4 s0, out vec4 s1, out vec4 s2) {
     ivec4 v = texelFetch(t_tets, texelRow(cell), 0);
     vec4 q[4];
@@ -139,8 +139,8 @@ void startFace(int cell, ivec4 nb, int from, vec3 origin, vec3 across_x, vec3 ac
     float best = 3.0e38;
     int pick = 0;
     for (int k = 0; k < 4; ++k) {
-        bool across = from == -1 ? nb[k] < 0 : nb[k] == from;
-        float score = (held[k] != 0.0 ? 0.0 : 8.0) + (across ? 0.0 : 4.0) + clamp(along[k], -1.0, 1.0);
+        bool entered = !from_boundary || nb[k] < 0;
+        float score = (held[k] != 0.0 ? 0.0 : 8.0) + (entered ? 0.0 : 4.0) + clamp(along[k], -1.0, 1.0);
         if (score < best) {
             best = score;
             pick = k;
