@@ -75,8 +75,9 @@ float edgeSide(int ia, vec4 a, int ib, vec4 b) {
     vec2 first = exactProduct(a.x, a.y, b.z, b.w);
     vec2 second = exactProduct(a.z, a.w, b.x, b.y);
     PRECISE float det = (first.x - second.x) + (first.y - second.y);
-    float down = (a.z + a.w) - (b.z + b.w);
-    float right = (b.x + b.y) - (a.x + a.y);
+    // PRECISE: in the order written, so that the ties are antisymmetric bit for bit too
+    PRECISE float down = (a.z + a.w) - (b.z + b.w);
+    PRECISE float right = (b.x + b.y) - (a.x + a.y);
     return det != 0.0 ? det : down != 0.0 ? down : right != 0.0 ? right : ia < ib ? 1.0 : -1.0;
 }
 
