@@ -330,6 +330,14 @@ def test_bad_mesh_files(tmp_path):
     no_scalar = _write(tmp_path, "v.vtu", points, [("hexahedron", hexa)], V=fields["V"])
     with pytest.raises(InputError, match=r"no scalar point array .*V \(3 components\)"):
         load_mesh(no_scalar)
+    # a file of cell data (finite-volume solvers write one value per cell): the error
+    # names the cell arrays as the reason there is no field
+    cell_data = tmp_path / "c.vtu"
+    meshio.write(str(cell_data), meshio.Mesh(points, [("hexahedron", hexa)], cell_data={"p": [np.array([1.0])]}))
+    for scalars in (None, "p"):
+        with pytest.raises(InputError, match=r"point array.*cell arrays are not rendered .*: p$") as e:
+            load_mesh(cell_data, scalars=scalars)
+        assert e.value.field == "scalars"
     np.savez(tmp_path / "bad.npz", points=points, tets=np.array([[0, 1, 2, 9]]), s=np.zeros(8))
     with pytest.raises(ValueError, match=r"tets\[0\] has index 9 out of range for 8 points"):
         load_mesh(tmp_path / "bad.npz")

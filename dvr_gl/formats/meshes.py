@@ -14,8 +14,9 @@
 
 The field is a point array chosen by name (``scalars``; default: the first array with
 one component and more than three distinct values, so that blanking flags such as
-IBlank are passed over; the first one-component array if all are flags). Points no cell
-uses are kept. :func:`is_mesh_file` says whether a path is a mesh rather than a volume;
+IBlank are passed over; the first one-component array if all are flags). Cell arrays
+(one value per cell) are not a field here; a file without a point array is an error that
+names them. Points no cell uses are kept. :func:`is_mesh_file` says whether a path is a mesh rather than a volume;
 :func:`point_arrays` lists a mesh file's point arrays.
 """
 
@@ -73,10 +74,13 @@ def is_mesh_file(path) -> bool:
 
 
 class _MeshFile:
-    """What a mesh file holds: points, tetrahedra and the point arrays by name."""
+    """What a mesh file holds: points, tetrahedra, the point arrays by name, and the names
+    of its cell arrays (not rendered: named in errors, so that a file of cell data says why
+    it has no field)."""
 
-    def __init__(self, points, tets, arrays):
+    def __init__(self, points, tets, arrays, cell_arrays=()):
         self.points, self.tets, self.arrays = points, tets, arrays
+        self.cell_arrays = tuple(cell_arrays)
 
 
 _last_read = {}
@@ -154,7 +158,7 @@ def _read_meshio(path):
     except (TypeError, ValueError) as e:
         raise InputError("cells", f"{path!r}: {e}") from None
     arrays = {name: np.asarray(a) for name, a in m.point_data.items()}
-    return _MeshFile(np.asarray(m.points), tets, arrays)
+    return _MeshFile(np.asarray(m.points), tets, arrays, m.cell_data.keys())
 
 
 def _meshio_read(meshio, path):
@@ -202,17 +206,20 @@ def load_mesh(path, scalars=None) -> TetMesh:
     arrays = content.arrays
     listing = ", ".join(f"{n} ({_components(a)} components)" if _components(a) != 1 else n
                         for n, a in arrays.items()) or "none"
+    # a field per cell (as finite-volume solvers write): named as the reason there is none
+    cell_note = (f". Its cell arrays are not rendered (the field is linear in each cell, from values at "
+                 f"the points): {', '.join(content.cell_arrays)}" if content.cell_arrays else "")
     if scalars is None:
         candidates = [n for n, a in arrays.items() if _components(a) == 1]
         # a field, not a flag: blanking arrays (IBlank: -1, 0, 1) come first in some files
         name = next((n for n in candidates if not _is_flag(arrays[n])), candidates[0] if candidates else None)
         if name is None:
             raise InputError("scalars", f"{path!r} has no scalar point array to render "
-                                        f"(point arrays: {listing})")
+                                        f"(point arrays: {listing})" + cell_note)
     else:
         name = str(scalars)
         if name not in arrays:
-            raise InputError("scalars", f"{path!r} has no point array {name!r}; available: {listing}")
+            raise InputError("scalars", f"{path!r} has no point array {name!r}; available: {listing}" + cell_note)
     values = arrays[name]
     if _components(values) != 1:
         raise InputError("scalars", f"point array {name!r} in {path!r} has {_components(values)} components; "
