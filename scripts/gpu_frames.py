@@ -3,7 +3,8 @@ report them for a lent GPU: the cell walk (exact segments and table segments), s
 volumes in each pixel stage, and the ray caster at VTK's one-voxel error, each at
 SIZE x SIZE with a new view each frame and the image read back (medians, after a warm-up;
 GPU time of one draw from a timer query). Writes JSON to --out and the 96x96 walk images
-beside it (for RMSE against exact, which this script does not compute).
+beside it; each walk row has their RMSE against ``reference.exact`` (float64, on the CPU),
+so that one run gives the exact mode's frames with their error.
 
     DVR_GL_DATA=../shared/data python scripts/gpu_frames.py [--size 1024] [--out gpu_frames.json] [--walk-only]
 
@@ -55,10 +56,11 @@ def median_ms(fn, args, warm=4):
     return round(1000 * float(np.median(times)), 2)
 
 
-def walk_rows(r, size, out, name, mesh, tf, cams, stage, lockstep):
+def walk_rows(r, size, out, name, mesh, tf, cams, stage, lockstep, exact96):
     """The cell walk on one mesh in ``stage`` ("auto": the renderer's choice), built with
     ``LOCKSTEP_LANES`` ``lockstep`` (None: the GL's own): exact segments, and table ones
-    for the default way; the 96x96 images saved beside ``out``."""
+    for the default way; the 96x96 images saved beside ``out``, their RMSE against
+    ``exact96`` (the exact image of the first view) in the rows."""
     rows = []
     tetra = get_technique("tetra")
     default = stage == "auto" and lockstep is None
@@ -68,11 +70,12 @@ def walk_rows(r, size, out, name, mesh, tf, cams, stage, lockstep):
         plan = tetra.make_plan(scenes[0], None, tables=r.tables, segments=segments, stage=stage)
         small = dvr_gl.Scene(mesh, tf, cams[0], 96, 96)
         label = segments + ("" if default else f"_{stage}" + ("" if lockstep is None else f"_lockstep{lockstep}"))
-        np.save(out.with_name(f"walk96_{name}_{label}.npy"),
-                r.render(small, "tetra", segments=segments, stage=stage))
+        image96 = r.render(small, "tetra", segments=segments, stage=stage)
+        np.save(out.with_name(f"walk96_{name}_{label}.npy"), image96)
         with current(r.ctx):
             rows.append(dict(mesh=name, segments=segments, stage=stage, lockstep=lockstep, size=size, frame_ms=frame,
-                             draw_gpu_ms=gpu_ms(r.ctx, lambda: tetra.draw(r, plan), 5)))
+                             draw_gpu_ms=gpu_ms(r.ctx, lambda: tetra.draw(r, plan), 5),
+                             rmse_96=float(f"{dvr_gl.metrics.rmse(image96, exact96):.3g}")))
         print(rows[-1], flush=True)
     return rows
 
@@ -98,10 +101,11 @@ def main():
         for name in ("bluntfin", "combustor", "loxpost"):
             mesh, tf = load_mesh_dataset(name)
             cams = [dvr_gl.default_camera(mesh, azimuth=30 + 7 * k, elevation=20) for k in range(29)]
-            rows += walk_rows(r, size, out, name, mesh, tf, cams, "auto", None)
-            rows += walk_rows(r, size, out, name, mesh, tf, cams, other_stage, None)
+            exact96 = dvr_gl.reference.exact(dvr_gl.Scene(mesh, tf, cams[0], 96, 96))
+            rows += walk_rows(r, size, out, name, mesh, tf, cams, "auto", None, exact96)
+            rows += walk_rows(r, size, out, name, mesh, tf, cams, other_stage, None, exact96)
             if not r.programs.context_defines["LOCKSTEP_LANES"]:
-                rows += walk_rows(lockstep, size, out, name, mesh, tf, cams, "auto", 1)
+                rows += walk_rows(lockstep, size, out, name, mesh, tf, cams, "auto", 1, exact96)
         if args.walk_only:
             write_json(out, results)
             return
