@@ -256,6 +256,35 @@ def test_lattice_delaunay_is_walked_by_its_topology(renderer):
             assert img[..., 3].mean() > 0.1 and tetra_walk.walk_counts(renderer, plan)[1] == 0
 
 
+def test_lattice_seen_along_its_diagonal_is_entered_where_its_hull_folds(renderer):
+    """Jittered lattices seen along their diagonal from (3, 3, 3): the centre column's rays
+    run in the plane x = y, through the hull's edge x = y = 1, where the Delaunay cells are
+    flat (collinear points jittered by less than float32 holds: their faces are needles, or
+    lines). Three faults lost whole rays there (alpha 0 or 2e-7 against 0.4 to 0.8):
+    (4, 1e-6) the entry pass's barycentric test, ill-conditioned on a needle, dropped the
+    face the signs say the ray enters by (its margin now grows with the face's
+    conditioning); (4, 1e-8) the rounded positions fold the hull's surface there, and the
+    first entry led through flat cells alone and out again beside it, where the next layer
+    tried only faces off the hull (such a walk is now no progress, and the hull faces next
+    to flat cells are tried again at its t); (6, 1e-8) the first layer's depth test tied
+    that entry with the true one at a smaller t, which the next layer then passed over
+    (the tied entries of larger cells are tried too)."""
+    tf = TransferFunction(color=[(0.0, 0.2, 0.4, 0.9), (1.0, 0.9, 0.2, 0.1)], opacity=[(0.0, 0.05), (1.0, 0.6)],
+                          unit_distance=0.5)
+    for n, jitter, seed, ortho in ((4, 1e-6, 1, True), (4, 1e-8, 2, True), (6, 1e-8, 2, True), (6, 1e-6, 0, False)):
+        axes = np.linspace(0.0, 1.0, n)
+        z, y, x = np.meshgrid(axes, axes, axes, indexing="ij")
+        points = np.stack([x, y, z], -1).reshape(-1, 3) + np.random.default_rng(seed).normal(scale=jitter, size=(n ** 3, 3))
+        value = 0.5 + 0.3 * np.sin(2.1 * points[:, 0] + 0.3) * np.cos(1.7 * points[:, 1] - 0.2) + 0.2 * np.sin(1.3 * points[:, 2] + 0.5)
+        mesh = TetMesh.from_points(points, value)
+        assert tetra_walk.rare_paths(mesh)["WALK_TOPO"] == 1 and tetra_walk.walk_flat(mesh).any()
+        camera = Camera((3, 3, 3), (0.5, 0.5, 0.5), up=(0, 0, 1), **({"ortho_height": 2.0} if ortho else {"fov": 30}))
+        scene = Scene(mesh, tf, camera, 63, 63)
+        img, plan = walk(renderer, scene)
+        assert np.abs(img - reference.exact(scene)).max() < GL_TOL, (n, jitter, seed)
+        assert tetra_walk.walk_counts(renderer, plan)[1] == 0
+
+
 def test_blocks_touching_turned_are_entered_where_they_are_left(renderer, exits):
     """Two blocks touching along a face, with their own points there (not joined), turned
     so that no plane is axis-aligned: a ray leaves the first through a boundary face and

@@ -221,6 +221,9 @@ def max_steps(mesh):
 
 
 HULL = -2                  # neighbours(hull=True): across a boundary face on the convex hull
+# After a walk through flat cells alone (no progress), the hull faces next to flat cells
+# are tried again within this share of the diagonal of its t (walk_entry.frag)
+HULL_WINDOW = 1e-4
 
 
 def neighbours(mesh, walked=None, hull=False):
@@ -268,10 +271,20 @@ def boundary_slots(mesh, walked=None):
 def reentry_faces(mesh, walked=None):
     """int32 indices of the vertices of ``boundary_faces`` that are not on the convex hull
     (``Topology.on_hull``): after the first layer, a ray enters again only through them (it
-    was inside every supporting plane and left one, which it cannot cross back)."""
+    was inside every supporting plane and left one, which it cannot cross back). And those
+    that share a point with a boundary face of a flat cell (``walk_flat``): a walk through
+    flat cells alone that leaves by the boundary is no progress (walk.frag), and the next
+    layer tries the other entries at its t, on the hull too."""
     topo = topology(mesh)
     cell, local = boundary_slots(mesh, walked)
-    keep = np.flatnonzero(~topo.on_hull[topo.tet_faces[cell, local]])
+    face = topo.tet_faces[cell, local]
+    keep = ~topo.on_hull[face]
+    flat = walk_flat(mesh)[cell]
+    if flat.any():
+        near_flat = np.zeros(mesh.n_points, bool)
+        near_flat[topo.faces[face[flat]].ravel()] = True
+        keep |= near_flat[topo.faces[face]].any(axis=1)
+    keep = np.flatnonzero(keep)
     return (3 * keep[:, None] + np.arange(3)).astype(np.int32).reshape(-1)
 
 
@@ -458,6 +471,8 @@ def draw(renderer, plan, data, texture):
     # a frame
     counted_from = min(walk.layers_drawn, MAX_PASSES)
     entered = []            # the layers' queries, each counting the pixels with an entry
+    ties = 0.0              # the next entry pass's u_tie_window (after first_entries)
+    hull_window = HULL_WINDOW * float(np.linalg.norm(mesh.extent))
     for layer in range(MAX_PASSES + 1):
         first_from_eye = layer == 0 and start >= 0
         if first_from_eye:
@@ -472,9 +487,12 @@ def draw(renderer, plan, data, texture):
             if layer == 0 and pick_prog is not None and start_vao is None:
                 found = first_entries(ctx, pick_prog, walk.vao(ctx, pick_prog), data, flags, targets, src, query,
                                       count, marker, depth_scale(scene))
+                ties = walk_entries.tie_window(depth_scale(scene))
             else:
                 found = entries(ctx, entry_prog, faces if layer == 0 else reentry, data, flags, targets, src,
-                                query, start_vao if starting else None, count, layer, marker)
+                                query, start_vao if starting else None, count, layer, marker, ties,
+                                walk.neighbours, -1.0 if layer == 0 else hull_window)
+                ties = 0.0
             if found == 0 and count:
                 break
             if layer == MAX_PASSES:         # the cap: what is left is counted, not walked

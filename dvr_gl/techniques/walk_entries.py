@@ -126,7 +126,8 @@ class StartFaces:
             self.buffer = None
 
 
-def entries(ctx, prog, faces, data, flags, targets, src, query, start, count, layer, marker):
+def entries(ctx, prog, faces, data, flags, targets, src, query, start, count, layer, marker, tie_window=0.0,
+            neighbours=None, hull_window=-1.0):
     """The entry pass of ``layer``: each pixel's nearest eligible entry (t, then the
     smallest cell at that t) into ``targets.entry_t`` and ``entry_cell``, and the pixels
     that have one marked at ``layer_depth(layer)`` in ``targets.marks`` (``marker``: the
@@ -138,11 +139,16 @@ def entries(ctx, prog, faces, data, flags, targets, src, query, start, count, la
     the pixels marked alive after the last layer's walk (the first draw; ``mark_alive``)
     or marked in this one (the second) are shaded. ``start``: (program, vertex array,
     vertices) of the start faces (orthographic rays that start inside the mesh; the
-    program built with START_FACES), drawn too."""
+    program built with START_FACES), drawn too. ``tie_window``: in the layer after
+    ``first_entries``, how close in t its depth test ties entries (``tie_window``)
+    (walk_entry.frag tries those again after a walk of no progress); else 0. ``hull_window``
+    (with ``neighbours``, the walk's texture) in the re-entry layers: how near such a stop a
+    hull face among ``faces`` is tried again (-1: the first layer, every face)."""
 
     def render(pick, textures, uniforms):
         for p, vao, vertices in ((prog, *faces), start) if start is not None else ((prog, *faces),):
-            bind(p, textures, {**uniforms, "u_pick_cell": pick})
+            bind(p, textures, {**uniforms, "u_pick_cell": pick, "u_tie_window": tie_window,
+                               "u_hull_window": hull_window})
             vao.render(ctx.TRIANGLES, vertices=vertices)
 
     def entry_blending():
@@ -156,7 +162,8 @@ def entries(ctx, prog, faces, data, flags, targets, src, query, start, count, la
 
     entry_blending()
     textures = {"t_planes": data.planes, "t_flags": flags, "t_state": targets.state[src],
-                "t_nearest": targets.entry_t, "t_tets": data.tets, "t_points": data.points}
+                "t_nearest": targets.entry_t, "t_tets": data.tets, "t_points": data.points,
+                **({"t_neighbours": neighbours} if neighbours is not None else {})}
     try:
         targets.entry_t_fbo.use()
         targets.entry_t_fbo.clear(NO_ENTRY, NO_ENTRY, NO_ENTRY, NO_ENTRY)
@@ -220,6 +227,12 @@ def depth_scale(scene):
     corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
     farthest = float(np.linalg.norm(corners - np.asarray(scene.camera.eye), axis=1).max())
     return 2.0 ** -math.frexp(max(farthest, 1e-30) * 1.01)[1]
+
+
+def tie_window(scale):
+    """How close in t ``first_entries``' depth test (window depth t * ``scale``, at least
+    24 bits) may tie two entries: eight steps of its depth, for any rounding."""
+    return 8.0 / (2.0 ** 24 * scale)
 
 
 def first_entries(ctx, prog, faces, data, flags, targets, src, query, count, marker, scale):

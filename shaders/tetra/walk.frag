@@ -342,6 +342,15 @@ void PIXEL_MAIN() {
     int steps = 0;
     int prev = -1;          // the cell the walk came from (-1: entered from the boundary or the eye)
     int stalled = 0;        // steps in a row that took the ray no further
+#if WALK_TOPO
+    // A cell with a volume walked in this layer. Where none is (only flat cells, as along a
+    // hull's edge of collinear points, whose faces are needles: their rounded positions
+    // across the ray may fold the hull's surface there), the ray can leave by a boundary
+    // face next to the one it came in by with no length between: such a walk is taken as
+    // no progress, so that the next layer tries the other entries at that t (depth peeling
+    // in the order of (t, cell)) rather than only those beyond.
+    bool solid = false;
+#endif
 #if WALK_OUTER
     int rare = 0;           // RARE_FLAT: at zero-volume `cell`; RARE_FOLD: `cell` left by a folded face
     // With lanes in lockstep, the segments that are not light wait for the outer loop: the
@@ -370,6 +379,9 @@ void PIXEL_MAIN() {
         while (steps < u_max_steps && stalled < MAX_STALLED) {
             ++steps;
             uint flags = texelFetch(t_flags, texelRow(cell), 0).r;
+#if WALK_TOPO
+            solid = solid || (flags & FLAT) == 0u;
+#endif
             ivec4 nb = texelFetch(t_neighbours, texelRow(cell), 0);
             int next;
 #if WALK_FLAT
@@ -402,7 +414,7 @@ void PIXEL_MAIN() {
                 }
                 stalled = t_end > t_cur ? 0 : stalled + 1;
                 t_cur = max(t_cur, t_end);
-                if (next == HULL && along_face > HULL_ALONG) done = true;   // no re-entry: no next layer
+                if (next == HULL && along_face > HULL_ALONG && solid) done = true;   // no re-entry: no next layer
                 if (t_cur >= kept.y) {
                     done = true;
                     break;
@@ -606,7 +618,12 @@ void PIXEL_MAIN() {
     } else if (!left) {                          // the guard: counted, the ray ended
         frag_state = vec4(DONE, -1.0, walked, state.w + 1.0);
     } else {
-        frag_state = vec4(t_cur, t_cur == entry_t ? float(entry_cell) : -1.0, walked, state.w);
+#if WALK_TOPO
+        bool progress = t_cur > entry_t && solid;
+#else
+        bool progress = t_cur > entry_t;
+#endif
+        frag_state = progress ? vec4(t_cur, -1.0, walked, state.w) : vec4(entry_t, float(entry_cell), walked, state.w);
     }
 }
 

@@ -31,6 +31,10 @@ uniform sampler2D t_state;     // per pixel: (t of the last stop (>= 1e38: done)
                                // when that walk made no progress (else -1), 0, guard hits)
 uniform sampler2D t_nearest;   // the first draw's result: the nearest eligible entry t
 uniform bool u_pick_cell;      // false: write t; true: write the cell, where t is the nearest
+uniform float u_tie_window;    // the layer after DEPTH_PICK's: how close its depth test ties t
+uniform isampler2D t_neighbours; // per cell: the cell across each face (-2: HULL, a face on the convex hull)
+uniform float u_hull_window;   // re-entry layers: how near a stop of no progress a hull face is tried (else -1)
+const int HULL = -2;           // t_neighbours across a face on the convex hull (tetra_walk.HULL)
 uniform usampler2D t_flags;    // R8UI per cell: bit 1 (2): zero volume or too thin (tetra/walk.frag)
 #ifndef START_FACES
 #define START_FACES 0          // the faces of cells the orthographic start plane cuts: an
@@ -106,6 +110,16 @@ void main() {
     float mm = dot(m, m);
     float margin = ENTRY_MARGIN * mm;
     float inside = min(min(dot(cross(ab, x - v_corner0), m), dot(cross(bc, x - v_corner1), m)), dot(cross(ca, x - v_corner2), m));
+#if WALK_TOPO
+    // The float32 rounding of the crossing x (of its reach, and of t over the rate the ray
+    // crosses the plane at) moves `inside` by up to |edge| |x's error| |m|: on a needle's
+    // face (|m| tiny against its edges, such as a flat cell along an edge of the hull) far
+    // more than the margin, so that the test alone could drop the face the ray enters by.
+    // Within that too the walk's signs decide.
+    float longest = sqrt(max(dot(ab, ab), max(dot(bc, bc), dot(ca, ca))));
+    float x_error = 16.0 * 1.2e-7 * (length(origin) + abs(t_entry)) * (1.0 + 1.0 / abs(face_along));
+    margin += x_error * longest * sqrt(mm);
+#endif
     if (inside < -margin) discard;
 #if WALK_TOPO
     // within the margin of an edge, the walk's own signs decide: faces that share an edge
@@ -119,7 +133,18 @@ void main() {
         if (!faceHolds(ivec3(v[(k + 1) & 3], v[(k + 2) & 3], v[(k + 3) & 3]), origin, across_x, across_y)) discard;
     }
 #endif
-    if (!(t_entry > state.x || (t_entry == state.x && float(cell) > state.y))) discard;
+    // After the first layer's one draw (DEPTH_PICK), whose depth test ties entries closer
+    // than its resolution (u_tie_window; 0 in the other layers) and takes the smallest
+    // cell of them, not the least t: after a walk of no progress from there (state.y: its
+    // cell), the entries it was tied with, of larger cells, are still to be tried.
+    bool tied = state.y >= 0.0 && float(cell) > state.y && abs(t_entry - state.x) <= u_tie_window;
+    if (!(t_entry > state.x || (t_entry == state.x && float(cell) > state.y) || tied)) discard;
+    // A ray that left the hull cannot cross it again; but by the topology a walk through
+    // flat cells alone (no progress: state.y its entry cell) may have come out where it
+    // went in, at a fold of the hull's needle faces: the hull faces there
+    // (tetra_walk.reentry_faces) are tried again, at that t only.
+    if (u_hull_window >= 0.0 && texelFetch(t_neighbours, texelRow(cell), 0)[v_slot - 4 * cell] == HULL &&
+        !(WALK_TOPO == 1 && state.y >= 0.0 && abs(t_entry - state.x) <= u_hull_window)) discard;
 #if DEPTH_PICK
     frag_value = vec4(t_entry, 0.0, 0.0, 1.0);
     frag_cell = vec4(float(cell), 0.0, 0.0, 1.0);

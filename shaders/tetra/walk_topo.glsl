@@ -41,6 +41,15 @@ void rayFrame(vec3 origin, vec3 dir, out vec3 across_x, out vec3 across_y) {
     across_y = towards_y < 0.0 ? -y : y;
 }
 
+// (x, y) as (x_high, x_rest, y_high, y_rest): each the sum of a high part of 12 bits and
+// the rest (Veltkamp), so that products of parts are exact in float32 (exactProduct)
+vec4 splitHalves(vec2 r) {
+    PRECISE vec2 c = 4097.0 * r;
+    PRECISE vec2 high = c - (c - r);
+    PRECISE vec2 rest = r - high;
+    return vec4(high.x, rest.x, high.y, rest.y);
+}
+
 // Corner `id` seen along the ray: its position (x, y) in the plane across it, the ray at
 // (0, 0), each coordinate split into a high part of 12 bits and the rest (Veltkamp), as
 // (x_high, x_rest, y_high, y_rest), for exactProduct. PRECISE keeps the compiler from
@@ -48,10 +57,7 @@ void rayFrame(vec3 origin, vec3 dir, out vec3 across_x, out vec3 across_y) {
 vec4 acrossRay(int id, vec3 origin, vec3 across_x, vec3 across_y) {
     PRECISE vec3 q = texelFetch(t_points, texelRow(id), 0).xyz - origin;
     PRECISE vec2 r = vec2(dot(q, across_x), dot(q, across_y));
-    PRECISE vec2 c = 4097.0 * r;
-    PRECISE vec2 high = c - (c - r);
-    PRECISE vec2 rest = r - high;
-    return vec4(high.x, rest.x, high.y, rest.y);
+    return splitHalves(r);
 }
 
 // a * b as product + error exactly (Dekker), from their splits (high, rest): products of
