@@ -473,6 +473,7 @@ def draw(renderer, plan, data, texture):
     entered = []            # the layers' queries, each counting the pixels with an entry
     ties = 0.0              # the next entry pass's u_tie_window (after first_entries)
     hull_window = HULL_WINDOW * float(np.linalg.norm(mesh.extent))
+    touch = walk_entries.touch_window(depth_scale(scene))
     for layer in range(MAX_PASSES + 1):
         first_from_eye = layer == 0 and start >= 0
         if first_from_eye:
@@ -491,7 +492,7 @@ def draw(renderer, plan, data, texture):
             else:
                 found = entries(ctx, entry_prog, faces if layer == 0 else reentry, data, flags, targets, src,
                                 query, start_vao if starting else None, count, layer, marker, ties,
-                                walk.neighbours, -1.0 if layer == 0 else hull_window)
+                                walk.neighbours, -1.0 if layer == 0 else hull_window, touch)
                 ties = 0.0
             if found == 0 and count:
                 break

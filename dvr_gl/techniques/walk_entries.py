@@ -127,7 +127,7 @@ class StartFaces:
 
 
 def entries(ctx, prog, faces, data, flags, targets, src, query, start, count, layer, marker, tie_window=0.0,
-            neighbours=None, hull_window=-1.0):
+            neighbours=None, hull_window=-1.0, touch_window=0.0):
     """The entry pass of ``layer``: each pixel's nearest eligible entry (t, then the
     smallest cell at that t) into ``targets.entry_t`` and ``entry_cell``, and the pixels
     that have one marked at ``layer_depth(layer)`` in ``targets.marks`` (``marker``: the
@@ -143,12 +143,13 @@ def entries(ctx, prog, faces, data, flags, targets, src, query, start, count, la
     ``first_entries``, how close in t its depth test ties entries (``tie_window``)
     (walk_entry.frag tries those again after a walk of no progress); else 0. ``hull_window``
     (with ``neighbours``, the walk's texture) in the re-entry layers: how near such a stop a
-    hull face among ``faces`` is tried again (-1: the first layer, every face)."""
+    hull face among ``faces`` is tried again (-1: the first layer, every face).
+    ``touch_window``: how far before a stop another part's entry is taken (``touch_window``)."""
 
     def render(pick, textures, uniforms):
         for p, vao, vertices in ((prog, *faces), start) if start is not None else ((prog, *faces),):
             bind(p, textures, {**uniforms, "u_pick_cell": pick, "u_tie_window": tie_window,
-                               "u_hull_window": hull_window})
+                               "u_hull_window": hull_window, "u_touch_window": touch_window})
             vao.render(ctx.TRIANGLES, vertices=vertices)
 
     def entry_blending():
@@ -227,6 +228,12 @@ def depth_scale(scene):
     corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
     farthest = float(np.linalg.norm(corners - np.asarray(scene.camera.eye), axis=1).max())
     return 2.0 ** -math.frexp(max(farthest, 1e-30) * 1.01)[1]
+
+
+def touch_window(scale):
+    """How far before where the last walk left (t) another part's entry is still taken
+    (walk_entry.frag): 2^-21 of the farthest t (``scale``: ``depth_scale``), 4 to 8 ulps there."""
+    return 2.0 ** -21 / scale
 
 
 def tie_window(scale):

@@ -618,12 +618,17 @@ void PIXEL_MAIN() {
     } else if (!left) {                          // the guard: counted, the ray ended
         frag_state = vec4(DONE, -1.0, walked, state.w + 1.0);
     } else {
+        // progress: beyond the entry and beyond the last stop, so that the stops only go
+        // further. An entry taken a rounding before the last stop (walk_entry.frag's
+        // touching: state.y -1) that got no further keeps that stop, with no second such
+        // try (-2); other walks of no progress leave their entry (t, cell) to go on from.
+        bool progress = t_cur > max(entry_t, state.x);
 #if WALK_TOPO
-        bool progress = t_cur > entry_t && solid;
-#else
-        bool progress = t_cur > entry_t;
+        progress = progress && solid;
 #endif
-        frag_state = progress ? vec4(t_cur, -1.0, walked, state.w) : vec4(entry_t, float(entry_cell), walked, state.w);
+        bool touched = state.y == -1.0 && entry_t < state.x;
+        frag_state = progress ? vec4(t_cur, -1.0, walked, state.w)
+                   : touched ? vec4(state.x, -2.0, walked, state.w) : vec4(entry_t, float(entry_cell), walked, state.w);
     }
 }
 

@@ -28,10 +28,11 @@ flat in vec3 v_corner0;        // the face's corners (walk_entry.geom)
 flat in vec3 v_corner1;
 flat in vec3 v_corner2;
 uniform sampler2D t_state;     // per pixel: (t of the last stop (>= 1e38: done), the cell entered last
-                               // when that walk made no progress (else -1), 0, guard hits)
+                               // when that walk made no progress (else -1; -2: walk.frag), 0, guard hits)
 uniform sampler2D t_nearest;   // the first draw's result: the nearest eligible entry t
 uniform bool u_pick_cell;      // false: write t; true: write the cell, where t is the nearest
 uniform float u_tie_window;    // the layer after DEPTH_PICK's: how close its depth test ties t
+uniform float u_touch_window;  // how far before a stop another part's entry is taken (rounding)
 uniform isampler2D t_neighbours; // per cell: the cell across each face (-2: HULL, a face on the convex hull)
 uniform float u_hull_window;   // re-entry layers: how near a stop of no progress a hull face is tried (else -1)
 const int HULL = -2;           // t_neighbours across a face on the convex hull (tetra_walk.HULL)
@@ -138,7 +139,13 @@ void main() {
     // cell of them, not the least t: after a walk of no progress from there (state.y: its
     // cell), the entries it was tied with, of larger cells, are still to be tried.
     bool tied = state.y >= 0.0 && float(cell) > state.y && abs(t_entry - state.x) <= u_tie_window;
-    if (!(t_entry > state.x || (t_entry == state.x && float(cell) > state.y) || tied)) discard;
+    // A part that touches the one the last walk left (state.y -1: it made progress) by a
+    // face of its own, not shared (a crack, or a flat cell taken out between them), is
+    // entered by another plane than the one left, which rounding may put a few ulps
+    // before the stop: its faces the ray enters are taken that close before it too, once
+    // a stop (a try that gets no further leaves state.y -2: walk.frag).
+    bool touching = state.y == -1.0 && state.x > 0.0 && face_along < 0.0 && t_entry >= state.x - u_touch_window;
+    if (!(t_entry > state.x || (t_entry == state.x && float(cell) > state.y) || tied || touching)) discard;
     // A ray that left the hull cannot cross it again; but by the topology a walk through
     // flat cells alone (no progress: state.y its entry cell) may have come out where it
     // went in, at a fold of the hull's needle faces: the hull faces there
