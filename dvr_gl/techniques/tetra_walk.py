@@ -272,15 +272,16 @@ def reentry_faces(mesh, walked=None):
     """int32 indices of the vertices of ``boundary_faces`` that are not on the convex hull
     (``Topology.on_hull``): after the first layer, a ray enters again only through them (it
     was inside every supporting plane and left one, which it cannot cross back). And those
-    that share a point with a boundary face of a flat cell (``walk_flat``): a walk through
-    flat cells alone that leaves by the boundary is no progress (walk.frag), and the next
-    layer tries the other entries at its t, on the hull too."""
+    that share a point with a boundary face of a flat cell (``walk_flat``), where the walk
+    is by topology (``rare_paths``): a walk through flat cells alone that leaves by the
+    boundary is no progress (walk.frag), and the next layer tries the other entries at its
+    t, on the hull too."""
     topo = topology(mesh)
     cell, local = boundary_slots(mesh, walked)
     face = topo.tet_faces[cell, local]
     keep = ~topo.on_hull[face]
     flat = walk_flat(mesh)[cell]
-    if flat.any():
+    if flat.any() and rare_paths(mesh)["WALK_TOPO"]:     # (the planes' rule never takes them)
         near_flat = np.zeros(mesh.n_points, bool)
         near_flat[topo.faces[face[flat]].ravel()] = True
         keep |= near_flat[topo.faces[face]].any(axis=1)
@@ -491,8 +492,8 @@ def draw(renderer, plan, data, texture):
                 ties = walk_entries.tie_window(depth_scale(scene))
             else:
                 found = entries(ctx, entry_prog, faces if layer == 0 else reentry, data, flags, targets, src,
-                                query, start_vao if starting else None, count, layer, marker, ties,
-                                walk.neighbours, -1.0 if layer == 0 else hull_window, touch)
+                                query, start_vao if starting else None, count, layer, marker, walk.neighbours,
+                                ties, -1.0 if layer == 0 else hull_window, touch)
                 ties = 0.0
             if found == 0 and count:
                 break

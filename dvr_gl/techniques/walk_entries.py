@@ -126,8 +126,8 @@ class StartFaces:
             self.buffer = None
 
 
-def entries(ctx, prog, faces, data, flags, targets, src, query, start, count, layer, marker, tie_window=0.0,
-            neighbours=None, hull_window=-1.0, touch_window=0.0):
+def entries(ctx, prog, faces, data, flags, targets, src, query, start, count, layer, marker, neighbours,
+            tie_window=0.0, hull_window=-1.0, touch_window=0.0):
     """The entry pass of ``layer``: each pixel's nearest eligible entry (t, then the
     smallest cell at that t) into ``targets.entry_t`` and ``entry_cell``, and the pixels
     that have one marked at ``layer_depth(layer)`` in ``targets.marks`` (``marker``: the
@@ -141,9 +141,10 @@ def entries(ctx, prog, faces, data, flags, targets, src, query, start, count, la
     vertices) of the start faces (orthographic rays that start inside the mesh; the
     program built with START_FACES), drawn too. ``tie_window``: in the layer after
     ``first_entries``, how close in t its depth test ties entries (``tie_window``)
-    (walk_entry.frag tries those again after a walk of no progress); else 0. ``hull_window``
-    (with ``neighbours``, the walk's texture) in the re-entry layers: how near such a stop a
-    hull face among ``faces`` is tried again (-1: the first layer, every face).
+    (walk_entry.frag tries those again after a walk of no progress); else 0. ``neighbours``:
+    the walk's texture (``HULL`` across hull faces); ``hull_window`` in the re-entry
+    layers: how near such a stop a hull face among ``faces`` is tried again (-1: the first
+    layer, every face).
     ``touch_window``: how far before a stop another part's entry is taken (``touch_window``)."""
 
     def render(pick, textures, uniforms):
@@ -164,7 +165,7 @@ def entries(ctx, prog, faces, data, flags, targets, src, query, start, count, la
     entry_blending()
     textures = {"t_planes": data.planes, "t_flags": flags, "t_state": targets.state[src],
                 "t_nearest": targets.entry_t, "t_tets": data.tets, "t_points": data.points,
-                **({"t_neighbours": neighbours} if neighbours is not None else {})}
+                "t_neighbours": neighbours}
     try:
         targets.entry_t_fbo.use()
         targets.entry_t_fbo.clear(NO_ENTRY, NO_ENTRY, NO_ENTRY, NO_ENTRY)

@@ -33,9 +33,6 @@ uniform sampler2D t_nearest;   // the first draw's result: the nearest eligible 
 uniform bool u_pick_cell;      // false: write t; true: write the cell, where t is the nearest
 uniform float u_tie_window;    // the layer after DEPTH_PICK's: how close its depth test ties t
 uniform float u_touch_window;  // how far before a stop another part's entry is taken (rounding)
-uniform isampler2D t_neighbours; // per cell: the cell across each face (-2: HULL, a face on the convex hull)
-uniform float u_hull_window;   // re-entry layers: how near a stop of no progress a hull face is tried (else -1)
-const int HULL = -2;           // t_neighbours across a face on the convex hull (tetra_walk.HULL)
 uniform usampler2D t_flags;    // R8UI per cell: bit 1 (2): zero volume or too thin (tetra/walk.frag)
 #ifndef START_FACES
 #define START_FACES 0          // the faces of cells the orthographic start plane cuts: an
@@ -55,6 +52,10 @@ out vec4 frag_value;
 #if DEPTH_PICK
 layout(location = 1) out vec4 frag_cell;
 uniform float u_depth_scale;
+#else                          // the re-entry layers' hull faces (not in the first layer's pick)
+uniform isampler2D t_neighbours; // per cell: the cell across each face (-2: HULL, a face on the convex hull)
+uniform float u_hull_window;   // re-entry layers: how near a stop of no progress a hull face is tried (else -1)
+const int HULL = -2;           // t_neighbours across a face on the convex hull (tetra_walk.HULL)
 #endif
 // The depth test before the shader, though it discards (it writes no depth): after the
 // first layer only the pixels marked (techniques/tetra_walk.py) are shaded. Without the
@@ -150,8 +151,10 @@ void main() {
     // flat cells alone (no progress: state.y its entry cell) may have come out where it
     // went in, at a fold of the hull's needle faces: the hull faces there
     // (tetra_walk.reentry_faces) are tried again, at that t only.
+#if !DEPTH_PICK
     if (u_hull_window >= 0.0 && texelFetch(t_neighbours, texelRow(cell), 0)[v_slot - 4 * cell] == HULL &&
         !(WALK_TOPO == 1 && state.y >= 0.0 && abs(t_entry - state.x) <= u_hull_window)) discard;
+#endif
 #if DEPTH_PICK
     frag_value = vec4(t_entry, 0.0, 0.0, 1.0);
     frag_cell = vec4(float(cell), 0.0, 0.0, 1.0);
