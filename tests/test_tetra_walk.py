@@ -210,6 +210,20 @@ def test_slivers_thinner_than_float32_resolves(renderer, exits):
         assert np.abs(img - reference.exact(scene)).max() < GL_TOL and img[..., 3].mean() > 0.05
 
 
+def _unit_lattice(n, jitter=0.0, seed=0):
+    """The points of an n^3 lattice on the unit cube (x fastest), each moved by a normal
+    jitter of that scale (none: the exact lattice)."""
+    axes = np.linspace(0.0, 1.0, n)
+    z, y, x = np.meshgrid(axes, axes, axes, indexing="ij")
+    points = np.stack([x, y, z], -1).reshape(-1, 3)
+    return points + np.random.default_rng(seed).normal(scale=jitter, size=points.shape) if jitter else points
+
+
+def _waves(p, k=(2.1, 1.7, 1.3)):
+    """A smooth field on the unit cube, of wave numbers k along x, y and z."""
+    return 0.5 + 0.3 * np.sin(k[0] * p[:, 0] + 0.3) * np.cos(k[1] * p[:, 1] - 0.2) + 0.2 * np.sin(k[2] * p[:, 2] + 0.5)
+
+
 def test_lattice_delaunay_is_walked_by_its_topology(renderer):
     """Delaunay of a 6^3 lattice jittered by 1e-10: slivers and flat cells in chains along
     the lattice planes, whose float32 plane crossings disagree from cell to cell (the
@@ -220,26 +234,16 @@ def test_lattice_delaunay_is_walked_by_its_topology(renderer):
     from an eye inside it, clear of its cell's faces, and on a face; and an 8^3 one from
     the centre of a lattice cube, on an edge of five cells (each ray starts in one of
     them that holds it by the signs: by the planes, 0.09 off)."""
-    def lattice(n):
-        axes = np.linspace(0.0, 1.0, n)
-        z, y, x = np.meshgrid(axes, axes, axes, indexing="ij")
-        points = np.stack([x, y, z], -1).reshape(-1, 3)
-        return points, points + np.random.default_rng(5).normal(size=points.shape) * 1e-10
-
-    def field(p):
-        return 0.5 + 0.3 * np.sin(6.3 * p[:, 0] + 0.3) * np.cos(5.1 * p[:, 1] - 0.2) + 0.2 * np.sin(3.9 * p[:, 2] + 0.5)
-
     tf = TransferFunction(color=[(0.0, 0.2, 0.4, 0.9), (1.0, 0.9, 0.2, 0.1)], opacity=[(0.0, 0.1), (1.0, 0.8)],
                           unit_distance=0.3)
-    grid, jittered = lattice(6)
-    _, jittered8 = lattice(8)
+    grid, jittered, jittered8 = _unit_lattice(6), _unit_lattice(6, 1e-10, 5), _unit_lattice(8, 1e-10, 5)
     inside = Camera((0.47, 0.33, 0.55), (0.9, 0.5, 0.1), fov=70)
     on_face = Camera((0.43, 0.37, 0.61), (0.9, 0.5, 0.1), fov=70)     # x + y = 0.8: a plane of faces
     on_edge = Camera((0.5, 0.5, 0.5), (0.5, 0.5, -1.0), fov=70)
     default = dvr_gl.default_camera
     for points, views in ((jittered, [(30, 20, False), (45, 35.264, True), inside, on_face]),
                           (grid, [(90, 0, True), (0, 0, False)]), (jittered8, [on_edge])):
-        mesh = TetMesh.from_points(points, field(points))
+        mesh = TetMesh.from_points(points, _waves(points, (6.3, 5.1, 3.9)))
         assert tetra_walk.rare_paths(mesh)["WALK_TOPO"] == 1 and tetra_walk.walk_flat(mesh).sum() > 50
         planes = M.topology(mesh).cell_planes()
         for view in views:
@@ -272,11 +276,8 @@ def test_lattice_seen_along_its_diagonal_is_entered_where_its_hull_folds(rendere
     tf = TransferFunction(color=[(0.0, 0.2, 0.4, 0.9), (1.0, 0.9, 0.2, 0.1)], opacity=[(0.0, 0.05), (1.0, 0.6)],
                           unit_distance=0.5)
     for n, jitter, seed, ortho in ((4, 1e-6, 1, True), (4, 1e-8, 2, True), (6, 1e-8, 2, True), (6, 1e-6, 0, False)):
-        axes = np.linspace(0.0, 1.0, n)
-        z, y, x = np.meshgrid(axes, axes, axes, indexing="ij")
-        points = np.stack([x, y, z], -1).reshape(-1, 3) + np.random.default_rng(seed).normal(scale=jitter, size=(n ** 3, 3))
-        value = 0.5 + 0.3 * np.sin(2.1 * points[:, 0] + 0.3) * np.cos(1.7 * points[:, 1] - 0.2) + 0.2 * np.sin(1.3 * points[:, 2] + 0.5)
-        mesh = TetMesh.from_points(points, value)
+        points = _unit_lattice(n, jitter, seed)
+        mesh = TetMesh.from_points(points, _waves(points))
         assert tetra_walk.rare_paths(mesh)["WALK_TOPO"] == 1 and tetra_walk.walk_flat(mesh).any()
         camera = Camera((3, 3, 3), (0.5, 0.5, 0.5), up=(0, 0, 1), **({"ortho_height": 2.0} if ortho else {"fov": 30}))
         scene = Scene(mesh, tf, camera, 63, 63)
@@ -293,15 +294,10 @@ def test_hollow_lattice_is_entered_again_where_its_parts_touch(renderer):
     over (a pixel 0.13 off): entries a rounding before a stop are now taken, once a stop.
     Seen along another diagonal, off the lattice planes by 1e-6, taking them without that
     bound went back and forth between two such entries up to the layers' cap."""
-    def field(p):
-        return 0.5 + 0.3 * np.sin(2.1 * p[:, 0] + 0.3) * np.cos(1.7 * p[:, 1] - 0.2) + 0.2 * np.sin(1.3 * p[:, 2] + 0.5)
-
     tf = TransferFunction(color=[(0.0, 0.2, 0.4, 0.9), (0.5, 0.9, 0.8, 0.2), (1.0, 0.9, 0.2, 0.1)],
                           opacity=[(0.0, 0.05), (0.5, 0.3), (1.0, 0.6)], unit_distance=0.5)
-    axes = np.linspace(0.0, 1.0, 7)
-    z, y, x = np.meshgrid(axes, axes, axes, indexing="ij")
-    points = np.stack([x, y, z], -1).reshape(-1, 3) + np.random.default_rng(18).normal(scale=1e-6, size=(343, 3))
-    mesh = TetMesh.from_points(points, field(points))
+    points = _unit_lattice(7, 1e-6, 18)
+    mesh = TetMesh.from_points(points, _waves(points))
     keep = np.abs(mesh.points[mesh.tets].mean(axis=1) - 0.5).max(axis=1) > 0.25
     hollow = TetMesh(mesh.points, mesh.tets[keep], mesh.scalars)
     shift = np.array([1e-6, 2e-6, -1.5e-6])

@@ -16,8 +16,8 @@ The field is a point array chosen by name (``scalars``; default: the first array
 one component and more than three distinct values, so that blanking flags such as
 IBlank are passed over; the first one-component array if all are flags). Cell arrays
 (one value per cell) are not a field here; a file without a point array is an error that
-names them. Points no cell uses are kept. :func:`is_mesh_file` says whether a path is a mesh rather than a volume;
-:func:`point_arrays` lists a mesh file's point arrays.
+names them. Points no cell uses are kept. :func:`is_mesh_file` says whether a path is a
+mesh rather than a volume; :func:`point_arrays` lists a mesh file's point arrays.
 """
 
 from __future__ import annotations

@@ -423,20 +423,20 @@ def draw(renderer, plan, data, texture):
                     **({"IN_PLACE": 1} if in_place else {})}
     walk_prog = (renderer.programs.compute("tetra/walk.frag", walk_defines) if compute else
                  renderer.programs.get("tetra/walk_layer.vert", "tetra/walk.frag", walk_defines))
+    diagonal = float(np.linalg.norm(mesh.extent))
+    scale = depth_scale(scene)         # t to window depth (DEPTH_PICK), and the entry passes' windows
     view_proj = data_projection(scene, near=None if scene.camera.is_ortho else
-                                1e-6 * float(np.linalg.norm(mesh.extent))).astype("f4").tobytes()
+                                1e-6 * diagonal).astype("f4").tobytes()
     cam = camera_uniforms(scene)
     starts = start_faces(mesh, scene.camera, walked, walk_flat(mesh))
     start_prog = None if starts is None else renderer.programs.get(
         "tetra/walk_entry.vert", "tetra/walk_entry.frag", dict(view, START_FACES=1), geometry="tetra/walk_entry.geom")
     for prog in (p for p in (entry_prog, pick_prog, start_prog) if p is not None):
         bind(prog, {}, {**cam, "u_target_size": scene.target_size, "u_inflate": grow_pixels(ctx),
-                        "u_centre": data.centre, "u_start_margin": 1e-6 * float(np.linalg.norm(mesh.extent))})
+                        "u_centre": data.centre, "u_start_margin": 1e-6 * diagonal})
         prog["u_view_proj"].write(view_proj)
-    walk_uniforms = {**cam, "u_centre": data.centre, "u_reach": float(np.linalg.norm(mesh.extent)),
-                     "u_knot_count": plan.knots.count,
-                     "u_inv_unit": plan.knots.inv_unit,
-                     "u_max_steps": max_steps(mesh), **clip_uniforms(scene)}
+    walk_uniforms = {**cam, "u_centre": data.centre, "u_reach": diagonal, "u_knot_count": plan.knots.count,
+                     "u_inv_unit": plan.knots.inv_unit, "u_max_steps": max_steps(mesh), **clip_uniforms(scene)}
     if scene.shading or scene.illustration:
         walk_uniforms.update(sample_term_uniforms(renderer, scene, plan.defines))
     knot_uniforms(walk_prog, plan.knots, plan.defines["KNOT_CAPACITY"])
@@ -473,8 +473,8 @@ def draw(renderer, plan, data, texture):
     counted_from = min(walk.layers_drawn, MAX_PASSES)
     entered = []            # the layers' queries, each counting the pixels with an entry
     ties = 0.0              # the next entry pass's u_tie_window (after first_entries)
-    hull_window = HULL_WINDOW * float(np.linalg.norm(mesh.extent))
-    touch = walk_entries.touch_window(depth_scale(scene))
+    hull_window = HULL_WINDOW * diagonal
+    touch = walk_entries.touch_window(scale)
     for layer in range(MAX_PASSES + 1):
         first_from_eye = layer == 0 and start >= 0
         if first_from_eye:
@@ -488,8 +488,8 @@ def draw(renderer, plan, data, texture):
             entered.append(query)
             if layer == 0 and pick_prog is not None and start_vao is None:
                 found = first_entries(ctx, pick_prog, walk.vao(ctx, pick_prog), data, flags, targets, src, query,
-                                      count, marker, depth_scale(scene))
-                ties = walk_entries.tie_window(depth_scale(scene))
+                                      count, marker, scale)
+                ties = walk_entries.tie_window(scale)
             else:
                 found = entries(ctx, entry_prog, faces if layer == 0 else reentry, data, flags, targets, src,
                                 query, start_vao if starting else None, count, layer, marker, walk.neighbours,

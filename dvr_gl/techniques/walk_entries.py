@@ -139,13 +139,13 @@ def entries(ctx, prog, faces, data, flags, targets, src, query, start, count, la
     the pixels marked alive after the last layer's walk (the first draw; ``mark_alive``)
     or marked in this one (the second) are shaded. ``start``: (program, vertex array,
     vertices) of the start faces (orthographic rays that start inside the mesh; the
-    program built with START_FACES), drawn too. ``tie_window``: in the layer after
-    ``first_entries``, how close in t its depth test ties entries (``tie_window``)
-    (walk_entry.frag tries those again after a walk of no progress); else 0. ``neighbours``:
-    the walk's texture (``HULL`` across hull faces); ``hull_window`` in the re-entry
-    layers: how near such a stop a hull face among ``faces`` is tried again (-1: the first
-    layer, every face).
-    ``touch_window``: how far before a stop another part's entry is taken (``touch_window``)."""
+    program built with START_FACES), drawn too. ``neighbours``: the walk's texture
+    (``HULL`` across hull faces). The windows (walk_entry.frag): ``tie_window``, in the
+    layer after ``first_entries``, how close in t its depth test ties entries (the
+    function ``tie_window``), else 0; ``hull_window``, in the re-entry layers, how near a
+    stop of no progress a hull face among ``faces`` is tried again (-1: the first layer,
+    every face); ``touch_window``, how far before a stop another part's entry is taken
+    (the function ``touch_window``)."""
 
     def render(pick, textures, uniforms):
         for p, vao, vertices in ((prog, *faces), start) if start is not None else ((prog, *faces),):
